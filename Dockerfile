@@ -1,0 +1,18 @@
+# Multi-stage build on Debian bookworm. The package list is scripts/packages.txt, the same file
+# scripts/setup.sh installs from, so the two cannot drift apart.
+FROM rust:1-bookworm AS build
+WORKDIR /src
+COPY scripts/packages.txt scripts/packages.txt
+RUN apt-get update && grep -v '^\s*#' scripts/packages.txt | grep -v '^\s*$' \
+    | xargs apt-get install -y --no-install-recommends && rm -rf /var/lib/apt/lists/*
+COPY . .
+RUN cargo build --release --locked
+
+FROM debian:bookworm-slim
+RUN apt-get update && apt-get install -y --no-install-recommends libembree3-3 ca-certificates \
+    && rm -rf /var/lib/apt/lists/*
+COPY --from=build /src/target/release/relume /usr/local/bin/relume
+COPY --from=build /src/scenes /usr/share/relume/scenes
+WORKDIR /usr/share/relume
+ENTRYPOINT ["relume"]
+CMD ["render", "scenes/cornell-box.json", "--technique", "path", "--spp", "256", "--out", "/tmp/cornell-box.png"]

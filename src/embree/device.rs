@@ -1,0 +1,89 @@
+//! The Embree device: one per process, shared by reference count.
+use super::error::{error_name, EmbreeError};
+use super::sys;
+use std::ffi::{c_char, c_void, CStr, CString};
+use std::sync::Arc;
+
+/// A ref-counted Embree device. Cloning shares the device; it is released with the last clone
+/// (and after every scene made from it, which each hold a clone).
+#[derive(Clone)]
+pub struct Device {
+    inner: Arc<DeviceHandle>,
+}
+
+struct DeviceHandle {
+    raw: sys::RTCDevice,
+}
+
+// SAFETY: Embree devices are thread-safe: the API may be called on one device from any thread
+// (Embree API docs, "Thread Safety"). The handle is only released in `Drop`, once.
+unsafe impl Send for DeviceHandle {}
+// SAFETY: see `Send`; shared access only calls thread-safe Embree functions.
+unsafe impl Sync for DeviceHandle {}
+
+impl Drop for DeviceHandle {
+    fn drop(&mut self) {
+        // SAFETY: `raw` came from a successful `rtcNewDevice` and is released exactly once here;
+        // every scene holds a `Device` clone, so none outlives it.
+        unsafe { sys::rtcReleaseDevice(self.raw) }
+    }
+}
+
+/// Embree calls this for every error on the device; it is routed to `tracing`.
+unsafe extern "C" fn log_device_error(_user: *mut c_void, code: sys::RTCError, message: *const c_char) {
+    let text = if message.is_null() {
+        String::new()
+    } else {
+        // SAFETY: Embree passes a NUL-terminated C string valid for the duration of the call.
+        unsafe { CStr::from_ptr(message) }.to_string_lossy().into_owned()
+    };
+    tracing::error!(target: "relume::embree", code = error_name(code), "{text}");
+}
+
+impl Device {
+    /// Creates a device whose build threads match `threads` (the rayon pool size); `0` lets
+    /// Embree use every core.
+    pub fn new(threads: usize) -> Result<Device, EmbreeError> {
+        Self::with_config(&format!("threads={threads},set_affinity=0,verbose=0"))
+    }
+
+    /// Creates a device from an Embree configuration string (see `rtcNewDevice`).
+    pub fn with_config(config: &str) -> Result<Device, EmbreeError> {
+        let config_c = CString::new(config).map_err(|_| EmbreeError::Device {
+            code: "RTC_ERROR_INVALID_ARGUMENT",
+            context: "device configuration contains a NUL byte".into(),
+        })?;
+        // SAFETY: `config_c` is a valid NUL-terminated string that outlives the call.
+        let raw = unsafe { sys::rtcNewDevice(config_c.as_ptr()) };
+        if raw.is_null() {
+            // SAFETY: a null device asks for the error of the last failed device creation.
+            let code = unsafe { sys::rtcGetDeviceError(std::ptr::null_mut()) };
+            return Err(EmbreeError::Device { code: error_name(code), context: format!("rtcNewDevice(\"{config}\")") });
+        }
+        // SAFETY: `raw` is a live device; the callback is a plain extern fn with no user data,
+        // valid for the whole program.
+        unsafe { sys::rtcSetDeviceErrorFunction(raw, Some(log_device_error), std::ptr::null_mut()) };
+        Ok(Device { inner: Arc::new(DeviceHandle { raw }) })
+    }
+
+    pub(crate) fn raw(&self) -> sys::RTCDevice {
+        self.inner.raw
+    }
+
+    /// Returns `Err` if Embree recorded an error on this device since the last check.
+    pub(crate) fn check(&self, context: impl FnOnce() -> String) -> Result<(), EmbreeError> {
+        // SAFETY: `raw` is a live device handle.
+        let code = unsafe { sys::rtcGetDeviceError(self.raw()) };
+        if code == sys::RTC_ERROR_NONE {
+            Ok(())
+        } else {
+            Err(EmbreeError::Device { code: error_name(code), context: context() })
+        }
+    }
+}
+
+impl std::fmt::Debug for Device {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Device").field("holders", &Arc::strong_count(&self.inner)).finish()
+    }
+}

@@ -1,0 +1,173 @@
+//! The Embree layer against analytic answers, on the real library.
+use glam::{Affine3A, Quat, Vec3};
+use relume::embree::{CommittedScene, Device, EmbreeError, Ray, Scene, SceneQuality};
+use std::sync::Arc;
+
+/// A unit square in the z = 0 plane, spanning [-1, 1]².
+fn square(device: &Device) -> Scene {
+    let mut s = Scene::new(device, SceneQuality::Static).unwrap();
+    let p =
+        [Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.0), Vec3::new(-1.0, 1.0, 0.0)];
+    s.attach_triangles(&p, &[[0, 1, 2], [0, 2, 3]]).unwrap();
+    s
+}
+
+#[test]
+fn hit_and_miss_match_the_plane_equation() {
+    let device = Device::new(1).unwrap();
+    let scene = square(&device).commit().unwrap();
+    // Ray from z=5 straight down at (0.3, -0.2): hits at t = 5 with barycentrics that give the point back.
+    let ray = Ray::new(Vec3::new(0.3, -0.2, 5.0), Vec3::new(0.0, 0.0, -1.0));
+    let hit = scene.intersect1(&ray).expect("must hit the square");
+    assert!((hit.t - 5.0).abs() < 1e-5, "t = {}", hit.t);
+    assert_eq!(hit.inst_id, None);
+    assert_eq!(hit.geom_id, 0);
+    let n = hit.ng.normalize();
+    assert!((n.z.abs() - 1.0).abs() < 1e-6);
+    // Oblique ray: t scales with the direction's length.
+    let ray = Ray::new(Vec3::new(0.0, 0.0, 2.0), Vec3::new(0.25, 0.0, -0.5));
+    let hit = scene.intersect1(&ray).unwrap();
+    assert!((hit.t - 4.0).abs() < 1e-5);
+    // Misses: outside the square, pointing away, and stopped short by tfar.
+    assert!(scene.intersect1(&Ray::new(Vec3::new(1.5, 0.0, 5.0), Vec3::NEG_Z)).is_none());
+    assert!(scene.intersect1(&Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::Z)).is_none());
+    assert!(scene.intersect1(&Ray::segment(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z, 4.99)).is_none());
+    assert!(scene.occluded1(&Ray::segment(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z, 5.01)));
+    assert!(!scene.occluded1(&Ray::segment(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z, 4.99)));
+    assert_eq!(scene.bounds(), Some((Vec3::new(-1.0, -1.0, 0.0), Vec3::new(1.0, 1.0, 0.0))));
+}
+
+#[test]
+fn packets_agree_with_single_rays() {
+    let device = Device::new(1).unwrap();
+    let scene = square(&device).commit().unwrap();
+    let rays8: [Ray; 8] = std::array::from_fn(|i| Ray::new(Vec3::new(-1.4 + 0.4 * i as f32, 0.1, 3.0), Vec3::NEG_Z));
+    let mut active = [true; 8];
+    active[3] = false;
+    let mut hits = [None; 8];
+    scene.intersect8(&rays8, &active, true, &mut hits);
+    let mut occ = [false; 8];
+    scene.occluded8(&rays8, &active, &mut occ);
+    for i in 0..8 {
+        let single = if active[i] { scene.intersect1(&rays8[i]) } else { None };
+        assert_eq!(hits[i], single, "lane {i}");
+        assert_eq!(occ[i], single.is_some(), "lane {i}");
+    }
+    assert!(hits.iter().filter(|h| h.is_some()).count() >= 4);
+    let rays16: [Ray; 16] =
+        std::array::from_fn(|i| Ray::new(Vec3::new(-1.6 + 0.2 * i as f32, -0.5, 3.0), Vec3::new(0.0, 0.05, -1.0)));
+    let active = [true; 16];
+    let mut hits = [None; 16];
+    let mut occ = [false; 16];
+    scene.intersect16(&rays16, &active, false, &mut hits);
+    scene.occluded16(&rays16, &active, &mut occ);
+    for i in 0..16 {
+        assert_eq!(hits[i], scene.intersect1(&rays16[i]), "lane {i}");
+        assert_eq!(occ[i], hits[i].is_some());
+    }
+}
+
+#[test]
+fn moving_an_instance_then_recommitting_changes_what_is_hit() {
+    let device = Device::new(1).unwrap();
+    let blas = Arc::new(square(&device).commit().unwrap());
+    let mut top = Scene::new(&device, SceneQuality::Dynamic).unwrap();
+    let id = top.attach_instance(blas, Affine3A::IDENTITY).unwrap();
+    let top = Arc::new(top.commit().unwrap());
+    let probe = Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z);
+    let hit = top.intersect1(&probe).unwrap();
+    assert_eq!(hit.inst_id, Some(id));
+    assert!((hit.t - 5.0).abs() < 1e-5);
+
+    // Lift the square by 2 and turn it 90° about X: the probe now misses, a ray along z=... hits.
+    let mut top = CommittedScene::edit_shared(top).map_err(|(_, e)| e).unwrap();
+    let moved = Affine3A::from_rotation_translation(
+        Quat::from_rotation_x(std::f32::consts::FRAC_PI_2),
+        Vec3::new(0.0, 0.0, 2.0),
+    );
+    top.set_instance_transform(id, moved).unwrap();
+    let top = top.commit().unwrap();
+    assert!(top.intersect1(&probe).map_or(true, |h| (h.t - 5.0).abs() > 0.5), "old position still hit");
+    // The square now lies in the y=0 plane, spanning z in [1, 3].
+    let side = Ray::new(Vec3::new(0.2, 4.0, 2.5), Vec3::NEG_Y);
+    let hit = top.intersect1(&side).expect("moved square must be hit from above");
+    assert!((hit.t - 4.0).abs() < 1e-4, "t = {}", hit.t);
+}
+
+#[test]
+fn a_shared_scene_cannot_be_edited() {
+    let device = Device::new(1).unwrap();
+    let shared = Arc::new(square(&device).commit().unwrap());
+    let other = Arc::clone(&shared);
+    let (back, err) = CommittedScene::edit_shared(shared).err().expect("must refuse while shared");
+    assert_eq!(err, EmbreeError::SceneShared(1));
+    drop(other);
+    assert!(CommittedScene::edit_shared(back).is_ok());
+}
+
+#[test]
+fn detaching_really_detaches() {
+    let device = Device::new(1).unwrap();
+    let mut s = square(&device);
+    let far = [Vec3::new(-1.0, -1.0, -3.0), Vec3::new(1.0, -1.0, -3.0), Vec3::new(0.0, 1.0, -3.0)];
+    let far_id = s.attach_triangles(&far, &[[0, 1, 2]]).unwrap();
+    let s = s.commit().unwrap();
+    let probe = Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z);
+    assert_eq!(s.intersect1(&probe).unwrap().geom_id, 0);
+    let mut s = s.edit();
+    s.detach(0).unwrap();
+    assert_eq!(s.geometry_count(), 1);
+    let s = s.commit().unwrap();
+    let hit = s.intersect1(&probe).expect("the far triangle remains");
+    assert_eq!(hit.geom_id, far_id);
+    assert!((hit.t - 8.0).abs() < 1e-5);
+    let mut s = s.edit();
+    assert_eq!(s.detach(0), Err(EmbreeError::UnknownGeometry(0)));
+    s.detach(far_id).unwrap();
+    let s = s.commit().unwrap();
+    assert!(s.intersect1(&probe).is_none());
+    assert!(s.bounds().is_none());
+}
+
+#[test]
+fn embree_errors_come_back_as_err() {
+    // A bad device configuration is refused by rtcNewDevice.
+    match Device::with_config("threads=lots") {
+        Err(EmbreeError::Device { code, .. }) => assert_ne!(code, "RTC_ERROR_NONE"),
+        other => panic!("expected a device error, got {other:?}"),
+    }
+    let device = Device::new(1).unwrap();
+    let mut s = square(&device);
+    // Setting an instance transform on a triangle mesh is an Embree INVALID_OPERATION.
+    match s.set_instance_transform(0, Affine3A::IDENTITY) {
+        Err(EmbreeError::Device { code, .. }) => assert_eq!(code, "RTC_ERROR_INVALID_OPERATION"),
+        other => panic!("expected an Embree error, got {other:?}"),
+    }
+    // Argument checks in front of Embree: out-of-range indices, NaN, empty meshes.
+    let p = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    assert!(matches!(s.attach_triangles(&p, &[[0, 1, 3]]), Err(EmbreeError::InvalidGeometry(_))));
+    assert!(matches!(
+        s.attach_triangles(&[Vec3::NAN, Vec3::X, Vec3::Y], &[[0, 1, 2]]),
+        Err(EmbreeError::InvalidGeometry(_))
+    ));
+    assert!(matches!(s.attach_triangles(&[], &[]), Err(EmbreeError::InvalidGeometry(_))));
+    assert_eq!(s.set_instance_transform(42, Affine3A::IDENTITY), Err(EmbreeError::UnknownGeometry(42)));
+    // The device is still usable afterwards.
+    let s = s.commit().unwrap();
+    assert!(s.intersect1(&Ray::new(Vec3::new(0.0, 0.0, 1.0), Vec3::NEG_Z)).is_some());
+}
+
+#[test]
+fn instance_normals_are_reported_in_object_space() {
+    // Pins down what Embree 3 reports as Ng for instanced geometry: the scene layer transforms it.
+    let device = Device::new(1).unwrap();
+    let blas = Arc::new(square(&device).commit().unwrap());
+    let mut top = Scene::new(&device, SceneQuality::Dynamic).unwrap();
+    let rot = Quat::from_rotation_x(std::f32::consts::FRAC_PI_2);
+    top.attach_instance(blas, Affine3A::from_quat(rot)).unwrap();
+    let top = top.commit().unwrap();
+    let hit = top.intersect1(&Ray::new(Vec3::new(0.1, 3.0, 0.2), Vec3::NEG_Y)).unwrap();
+    let n = hit.ng.normalize();
+    // World normal would be ±Y; the square's object-space normal is +Z.
+    assert!((n - Vec3::Z).length() < 1e-6, "Ng = {n}");
+}
