@@ -1,1 +1,49 @@
-fn main() {}
+//! The `relume` binary: thin argument parsing over the library.
+//!
+//! - `relume render SCENE.json --technique path --spp N --out FILE.(png|jpg|exr)`
+//! - `relume render SCENE.json --anim NAME.anim.json --frames N --out DIR/`
+//! - `relume bench rays SCENE.json [--json FILE]`
+//!
+//! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
+use clap::{Parser, Subcommand};
+use relume::tools::render;
+use std::process::ExitCode;
+
+#[derive(Parser)]
+#[command(
+    name = "relume",
+    version,
+    about = "Dynamic global illumination: resident light transport, verified and partly retraced every tick"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Render a still image or an animation through the engine's tick pipeline.
+    Render(render::RenderArgs),
+}
+
+fn main() -> ExitCode {
+    tracing_subscriber::fmt()
+        .with_env_filter(tracing_subscriber::EnvFilter::try_from_default_env().unwrap_or_else(|_| "relume=info".into()))
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Render(args) => render::run(args),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            if e.downcast_ref::<relume::tools::UsageError>().is_some() {
+                ExitCode::from(2)
+            } else {
+                ExitCode::FAILURE
+            }
+        }
+    }
+}

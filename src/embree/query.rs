@@ -168,3 +168,38 @@ macro_rules! packet_queries {
 
 packet_queries!(8, RTCRayHit8, RTCRay8, intersect8, occluded8, version::intersect8, version::occluded8);
 packet_queries!(16, RTCRayHit16, RTCRay16, intersect16, occluded16, version::intersect16, version::occluded16);
+
+impl CommittedScene {
+    /// Closest hits for any number of lanes: 16 and 8 lanes go to Embree's packet kernels, any
+    /// other count is traced ray by ray. Inactive lanes are left `None`.
+    pub fn intersect_lanes(&self, rays: &[Ray], active: &[bool], coherent: bool, hits: &mut [Option<Hit>]) {
+        if let (Ok(r), Ok(a), Ok(h)) =
+            (rays.try_into(), active.try_into(), <&mut [Option<Hit>; 16]>::try_from(&mut *hits))
+        {
+            return self.intersect16(r, a, coherent, h);
+        }
+        if let (Ok(r), Ok(a), Ok(h)) =
+            (rays.try_into(), active.try_into(), <&mut [Option<Hit>; 8]>::try_from(&mut *hits))
+        {
+            return self.intersect8(r, a, coherent, h);
+        }
+        for ((r, a), h) in rays.iter().zip(active).zip(hits.iter_mut()) {
+            *h = if *a { self.intersect1(r) } else { None };
+        }
+    }
+
+    /// Occlusion for any number of lanes, dispatched like [`CommittedScene::intersect_lanes`].
+    pub fn occluded_lanes(&self, rays: &[Ray], active: &[bool], occluded: &mut [bool]) {
+        if let (Ok(r), Ok(a), Ok(o)) = (rays.try_into(), active.try_into(), <&mut [bool; 16]>::try_from(&mut *occluded))
+        {
+            return self.occluded16(r, a, o);
+        }
+        if let (Ok(r), Ok(a), Ok(o)) = (rays.try_into(), active.try_into(), <&mut [bool; 8]>::try_from(&mut *occluded))
+        {
+            return self.occluded8(r, a, o);
+        }
+        for ((r, a), o) in rays.iter().zip(active).zip(occluded.iter_mut()) {
+            *o = *a && self.occluded1(r);
+        }
+    }
+}

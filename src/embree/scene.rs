@@ -242,6 +242,11 @@ impl CommittedScene {
         self.handle.raw
     }
 
+    /// The device this scene was made on.
+    pub fn device(&self) -> &Device {
+        &self.handle.device
+    }
+
     /// World-space bounds of everything in the scene, `None` when empty.
     pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
         let mut b = sys::RTCBounds::default();

@@ -1,0 +1,169 @@
+//! The engine: a [`Session`] owns a scene, its Embree scenes, a technique and a film, and runs
+//! the tick pipeline (ARCHITECTURE.md, "The tick"):
+//!
+//! 1. **Drain** the queue of client edits.
+//! 2. **Apply** them to the scene model → [`SceneDelta`] (latest edit per target wins; the
+//!    coalesced count is reported).
+//! 3. **Commit** only the moved instances to Embree's top-level scene.
+//! 4. **Update** the technique with the delta (verify / invalidate / retrace); the film is reset
+//!    when anything changed.
+//! 5. **Render** on rayon.
+//! 6. **Resolve** the film into a linear image; encoding happens where the frame is consumed.
+//!
+//! Nothing traces while Embree commits: the phases run in order inside one session. The engine
+//! never touches tokio or axum; callers run `tick` on a rayon pool made by [`thread_pool`].
+mod stats;
+
+pub use stats::{PhaseTimes, TickStats};
+
+use crate::embree::{self, Device, EmbreeError};
+use crate::film::{bilateral_filter, Film, LinearImage};
+use crate::scene::edits::{self, Edit, SceneDelta};
+use crate::scene::{Scene, SceneAccel, SceneError};
+use crate::technique::{self, RenderContext, Technique, TechniqueConfig, TechniqueError};
+use std::time::Instant;
+use thiserror::Error;
+
+#[derive(Debug, Error)]
+pub enum EngineError {
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Embree(#[from] EmbreeError),
+    #[error(transparent)]
+    Technique(#[from] TechniqueError),
+    #[error("thread pool: {0}")]
+    ThreadPool(String),
+}
+
+/// A rendered frame: the resolved image and the stats of the tick that made it.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    pub tick: u64,
+    pub accumulation_id: u64,
+    /// Render passes accumulated since the last reset.
+    pub spp: u32,
+    pub image: LinearImage,
+    pub stats: TickStats,
+}
+
+/// A rayon pool whose workers flush denormals to zero, as Embree asks.
+pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, EngineError> {
+    rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .thread_name(|i| format!("relume-worker-{i}"))
+        .start_handler(|_| embree::flush_denormals_to_zero())
+        .build()
+        .map_err(|e| EngineError::ThreadPool(e.to_string()))
+}
+
+/// One scene, its light transport and its film, ticking.
+pub struct Session {
+    scene: Scene,
+    accel: SceneAccel,
+    technique: Box<dyn Technique>,
+    config: TechniqueConfig,
+    film: Film,
+    seed: u64,
+    tick: u64,
+    pending: Vec<Edit>,
+}
+
+impl Session {
+    pub fn new(scene: Scene, config: &TechniqueConfig, seed: u64, device: &Device) -> Result<Session, EngineError> {
+        let technique = technique::build(config, &scene)?;
+        let accel = SceneAccel::build(device, &scene)?;
+        let film = Film::new(scene.camera.width, scene.camera.height);
+        Ok(Session { scene, accel, technique, config: config.clone(), film, seed, tick: 0, pending: Vec::new() })
+    }
+
+    pub fn scene(&self) -> &Scene {
+        &self.scene
+    }
+
+    pub fn config(&self) -> &TechniqueConfig {
+        &self.config
+    }
+
+    pub fn tick_count(&self) -> u64 {
+        self.tick
+    }
+
+    pub fn film(&self) -> &Film {
+        &self.film
+    }
+
+    /// Validates edits against the current scene and queues them for the next tick. A rejected
+    /// batch queues nothing.
+    pub fn queue_edits(&mut self, batch: Vec<Edit>) -> Result<(), SceneError> {
+        edits::validate(&self.scene, &batch)?;
+        self.pending.extend(batch);
+        Ok(())
+    }
+
+    pub fn pending_edits(&self) -> usize {
+        self.pending.len()
+    }
+
+    /// Runs one tick: drain → apply → commit → update → render → resolve.
+    pub fn tick(&mut self) -> Result<Frame, EngineError> {
+        let start = Instant::now();
+        let mut times = PhaseTimes::default();
+
+        // Drain the queue and apply it to the model.
+        let batch = std::mem::take(&mut self.pending);
+        times.drain_ms = ms(start);
+        let t = Instant::now();
+        let delta: SceneDelta = edits::apply(&mut self.scene, batch)?;
+        times.apply_ms = ms(t);
+
+        // Commit only moved instances to Embree.
+        let t = Instant::now();
+        let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
+        self.accel.update_instances(&self.scene, &moved)?;
+        times.commit_ms = ms(t);
+
+        // Let the technique verify and invalidate; restart accumulation on any change.
+        let t = Instant::now();
+        if !delta.is_empty() {
+            self.film.reset();
+        }
+        let ctx = RenderContext { scene: &self.scene, accel: &self.accel, seed: self.seed, tick: self.tick };
+        self.technique.update(&ctx, &delta)?;
+        times.update_ms = ms(t);
+
+        let t = Instant::now();
+        let render = self.technique.render(&ctx, &mut self.film)?;
+        times.render_ms = ms(t);
+
+        let t = Instant::now();
+        let mut image = self.film.resolve();
+        if let Some(f) = self.technique.preview_filter() {
+            image = bilateral_filter(&image, f.sigma_spatial_px, f.sigma_range);
+        }
+        times.resolve_ms = ms(t);
+        times.total_ms = ms(start);
+
+        let stats = TickStats {
+            tick: self.tick,
+            technique: self.technique.id().to_string(),
+            times,
+            rays: render.rays,
+            edits_received: delta.received,
+            edits_coalesced: delta.coalesced,
+            moved_surfaces: delta.moved.len(),
+            spp: self.film.passes,
+            paths_per_pixel: self.film.mean_paths_per_pixel(),
+            accumulation_id: self.film.accumulation_id,
+            detail: render.detail,
+        };
+        let frame =
+            Frame { tick: self.tick, accumulation_id: self.film.accumulation_id, spp: self.film.passes, image, stats };
+        self.tick += 1;
+        Ok(frame)
+    }
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
+}

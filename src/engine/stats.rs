@@ -1,0 +1,35 @@
+//! Per-tick statistics, forwarded unchanged by the server.
+use crate::technique::{RayCounts, TechniqueStats};
+use serde::{Deserialize, Serialize};
+
+/// Wall time of each tick phase, milliseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PhaseTimes {
+    pub drain_ms: f64,
+    pub apply_ms: f64,
+    pub commit_ms: f64,
+    pub update_ms: f64,
+    pub render_ms: f64,
+    pub resolve_ms: f64,
+    pub total_ms: f64,
+}
+
+/// What one tick did.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TickStats {
+    pub tick: u64,
+    pub technique: String,
+    pub times: PhaseTimes,
+    pub rays: RayCounts,
+    /// Edits drained this tick, and how many of them a later edit to the same target replaced.
+    pub edits_received: usize,
+    pub edits_coalesced: usize,
+    /// Objects and light shapes whose Embree instance was updated.
+    pub moved_surfaces: usize,
+    /// Render passes accumulated since the last reset.
+    pub spp: u32,
+    /// Mean number of estimates (paths) per pixel since the last reset.
+    pub paths_per_pixel: f64,
+    pub accumulation_id: u64,
+    pub detail: TechniqueStats,
+}

@@ -1,0 +1,94 @@
+//! Progressive accumulation: per pixel, the f64 sum of path contributions and the number of
+//! paths, so that techniques that start a variable number of paths per pixel (path regeneration)
+//! stay consistent: the ratio of sums converges to the pixel's expected radiance.
+use super::image::LinearImage;
+use crate::core::Rgb;
+use rayon::prelude::*;
+
+/// One pixel's running sums.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PixelAccum {
+    pub sum: [f64; 3],
+    /// Number of estimates added (paths, or 1 per pass for techniques that average themselves).
+    pub count: f64,
+}
+
+impl PixelAccum {
+    pub fn add(&mut self, value: Rgb) {
+        self.sum[0] += value.r as f64;
+        self.sum[1] += value.g as f64;
+        self.sum[2] += value.b as f64;
+    }
+
+    pub fn mean(&self) -> Rgb {
+        if self.count <= 0.0 {
+            return Rgb::BLACK;
+        }
+        let inv = 1.0 / self.count;
+        Rgb::new((self.sum[0] * inv) as f32, (self.sum[1] * inv) as f32, (self.sum[2] * inv) as f32)
+    }
+}
+
+/// The accumulation buffer of a session.
+#[derive(Clone, Debug)]
+pub struct Film {
+    pub width: u32,
+    pub height: u32,
+    pixels: Vec<PixelAccum>,
+    /// Changes on every reset, so clients can tell a new accumulation from a continued one.
+    pub accumulation_id: u64,
+    /// Render passes accumulated since the last reset.
+    pub passes: u32,
+}
+
+impl Film {
+    pub fn new(width: u32, height: u32) -> Film {
+        Film {
+            width,
+            height,
+            pixels: vec![PixelAccum::default(); (width * height) as usize],
+            accumulation_id: 0,
+            passes: 0,
+        }
+    }
+
+    /// Discards the accumulation (something in the scene changed).
+    pub fn reset(&mut self) {
+        self.pixels.iter_mut().for_each(|p| *p = PixelAccum::default());
+        self.accumulation_id += 1;
+        self.passes = 0;
+    }
+
+    /// Runs `f(first_pixel_index, chunk)` on consecutive chunks of `chunk_len` pixels in
+    /// parallel and reduces what they return with `merge`. Chunks are fixed by index, so pixel
+    /// values do not depend on scheduling.
+    pub fn accumulate_chunks<T, F, M>(&mut self, chunk_len: usize, f: F, merge: M) -> T
+    where
+        T: Default + Send,
+        F: Fn(usize, &mut [PixelAccum]) -> T + Sync + Send,
+        M: Fn(T, T) -> T + Sync + Send,
+    {
+        self.pixels
+            .par_chunks_mut(chunk_len.max(1))
+            .enumerate()
+            .map(|(i, chunk)| f(i * chunk_len, chunk))
+            .reduce(T::default, merge)
+    }
+
+    pub fn pixels(&self) -> &[PixelAccum] {
+        &self.pixels
+    }
+
+    /// Mean estimates per pixel (`count`-weighted average of what was added).
+    pub fn mean_paths_per_pixel(&self) -> f64 {
+        self.pixels.iter().map(|p| p.count).sum::<f64>() / self.pixels.len().max(1) as f64
+    }
+
+    pub fn resolve(&self) -> LinearImage {
+        LinearImage {
+            width: self.width,
+            height: self.height,
+            pixels: self.pixels.iter().map(PixelAccum::mean).collect(),
+        }
+    }
+}

@@ -1,0 +1,14 @@
+//! The film: progressive accumulation, resolve to a linear image, tonemapping and encoding.
+//!
+//! Units: pixel values are radiance (W/(sr·m²)), linear Rec.709. The sRGB transfer function is
+//! applied only when encoding 8-bit formats; EXR stays linear. Accumulation is in f64 so a film
+//! can run for hours without losing small contributions.
+mod accum;
+mod encode;
+mod filter;
+mod image;
+
+pub use accum::{Film, PixelAccum};
+pub use encode::{encode, write_image, EncodeError, ImageFormat};
+pub use filter::bilateral_filter;
+pub use image::LinearImage;

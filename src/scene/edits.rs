@@ -1,0 +1,318 @@
+//! Client edits and what applying them changed.
+//!
+//! Edits arrive in batches; the latest edit per target wins (light and camera edits merge
+//! field by field), and the number coalesced is reported, never hidden. A batch is validated
+//! as a whole before anything is applied: a bad edit rejects the batch and changes nothing.
+//! Applying yields a [`SceneDelta`] with old and new transforms and world bounds of everything
+//! that moved, which techniques use to verify or invalidate what they store.
+use super::load::{validate_emitter, validate_material, validate_trs, SceneError};
+use super::model::{CameraDesc, EmitterDesc, Material, Trs};
+use super::{Scene, SurfaceId};
+use glam::{Affine3A, Vec3};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// One edit. JSON: `{"target": "object", "name": "bunny-1", "transform": {...}}`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "target", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Edit {
+    /// Moves a dynamic object.
+    Object { name: String, transform: Trs },
+    /// Moves a dynamic light and/or changes its emission (same emitter type).
+    Light {
+        name: String,
+        #[serde(default)]
+        transform: Option<Trs>,
+        #[serde(default)]
+        emitter: Option<EmitterDesc>,
+    },
+    /// Changes the camera; the resolution is the session's and cannot be edited.
+    Camera {
+        #[serde(default)]
+        position: Option<[f32; 3]>,
+        #[serde(default)]
+        look_at: Option<[f32; 3]>,
+        #[serde(default)]
+        up: Option<[f32; 3]>,
+        #[serde(default)]
+        vfov_deg: Option<f32>,
+    },
+    /// Replaces a material's parameters.
+    Material { name: String, material: Material },
+}
+
+/// An axis-aligned box in world space.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    pub min: Vec3,
+    pub max: Vec3,
+}
+
+impl Aabb {
+    pub fn of_points(points: impl IntoIterator<Item = Vec3>) -> Aabb {
+        points.into_iter().fold(Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY }, |b, p| Aabb {
+            min: b.min.min(p),
+            max: b.max.max(p),
+        })
+    }
+
+    pub fn union(&self, o: &Aabb) -> Aabb {
+        Aabb { min: self.min.min(o.min), max: self.max.max(o.max) }
+    }
+}
+
+/// A surface whose placement changed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MovedSurface {
+    pub surface: SurfaceId,
+    pub old_world_from_object: Affine3A,
+    pub new_world_from_object: Affine3A,
+    pub old_bounds: Aabb,
+    pub new_bounds: Aabb,
+}
+
+/// What one tick's edits changed.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct SceneDelta {
+    /// Objects and light shapes that moved (Embree instances to update).
+    pub moved: Vec<MovedSurface>,
+    /// Lights whose transform or emission changed, by index.
+    pub lights: Vec<usize>,
+    /// Materials whose parameters changed, by index.
+    pub materials: Vec<usize>,
+    pub camera: bool,
+    /// Edits received this tick, and how many of them a later edit to the same target replaced.
+    pub received: usize,
+    pub coalesced: usize,
+}
+
+impl SceneDelta {
+    pub fn is_empty(&self) -> bool {
+        self.moved.is_empty() && self.lights.is_empty() && self.materials.is_empty() && !self.camera
+    }
+}
+
+fn err(index: usize, field: &str, message: impl Into<String>) -> SceneError {
+    SceneError::Invalid { field: format!("edits[{index}]{field}"), message: message.into() }
+}
+
+fn reindex(index: usize, e: SceneError) -> SceneError {
+    match e {
+        SceneError::Invalid { field, message } => {
+            SceneError::Invalid { field: format!("edits[{index}].{field}"), message }
+        }
+        other => other,
+    }
+}
+
+/// Merges a batch into one edit per target, in first-seen order; returns them and the number
+/// coalesced. Each kept edit remembers the index of the last edit that shaped it (for errors).
+pub fn coalesce(edits: Vec<Edit>) -> (Vec<(usize, Edit)>, usize) {
+    let received = edits.len();
+    let mut order: Vec<String> = Vec::new();
+    let mut merged: BTreeMap<String, (usize, Edit)> = BTreeMap::new();
+    for (i, e) in edits.into_iter().enumerate() {
+        let key = match &e {
+            Edit::Object { name, .. } => format!("object/{name}"),
+            Edit::Light { name, .. } => format!("light/{name}"),
+            Edit::Camera { .. } => "camera".to_string(),
+            Edit::Material { name, .. } => format!("material/{name}"),
+        };
+        let next = match (merged.remove(&key), e) {
+            (Some((_, Edit::Light { name, transform: t0, emitter: e0 })), Edit::Light { transform, emitter, .. }) => {
+                Edit::Light { name, transform: transform.or(t0), emitter: emitter.or(e0) }
+            }
+            (
+                Some((_, Edit::Camera { position: p0, look_at: l0, up: u0, vfov_deg: v0 })),
+                Edit::Camera { position, look_at, up, vfov_deg },
+            ) => Edit::Camera {
+                position: position.or(p0),
+                look_at: look_at.or(l0),
+                up: up.or(u0),
+                vfov_deg: vfov_deg.or(v0),
+            },
+            (previous, e) => {
+                if previous.is_none() {
+                    order.push(key.clone());
+                }
+                e
+            }
+        };
+        merged.insert(key, (i, next));
+    }
+    let kept: Vec<(usize, Edit)> = order.into_iter().filter_map(|k| merged.remove(&k)).collect();
+    let coalesced = received - kept.len();
+    (kept, coalesced)
+}
+
+/// Checks a batch against the scene without changing anything.
+pub fn validate(scene: &Scene, edits: &[Edit]) -> Result<(), SceneError> {
+    let (merged, _) = coalesce(edits.to_vec());
+    validate_coalesced(scene, &merged)
+}
+
+fn validate_coalesced(scene: &Scene, edits: &[(usize, Edit)]) -> Result<(), SceneError> {
+    for (i, e) in edits {
+        let i = *i;
+        match e {
+            Edit::Object { name, transform } => {
+                let idx =
+                    scene.object_index(name).ok_or_else(|| err(i, ".name", format!("unknown object '{name}'")))?;
+                if !scene.objects[idx].dynamic {
+                    return Err(err(
+                        i,
+                        ".name",
+                        format!("object '{name}' is static; only objects with \"dynamic\": true can move"),
+                    ));
+                }
+                validate_trs("transform", transform).map_err(|e| reindex(i, e))?;
+            }
+            Edit::Light { name, transform, emitter } => {
+                let idx = scene.light_index(name).ok_or_else(|| err(i, ".name", format!("unknown light '{name}'")))?;
+                if let Some(t) = transform {
+                    if !scene.lights[idx].dynamic && *t != scene.desc().lights[idx].transform {
+                        return Err(err(
+                            i,
+                            ".name",
+                            format!("light '{name}' is static; only lights with \"dynamic\": true can move"),
+                        ));
+                    }
+                    validate_trs("transform", t).map_err(|e| reindex(i, e))?;
+                }
+                if let Some(em) = emitter {
+                    validate_emitter("emitter", em).map_err(|e| reindex(i, e))?;
+                    let current = &scene.desc().lights[idx].emitter;
+                    if std::mem::discriminant(em) != std::mem::discriminant(current) {
+                        return Err(err(i, ".emitter.type", "a light cannot change its emitter type"));
+                    }
+                    if let (EmitterDesc::Disc { segments: a, .. }, EmitterDesc::Disc { segments: b, .. }) =
+                        (em, current)
+                    {
+                        if a != b {
+                            return Err(err(i, ".emitter.segments", "a disc light's tessellation cannot change"));
+                        }
+                    }
+                }
+            }
+            Edit::Camera { .. } => {
+                let cam = merged_camera(scene.desc().camera.clone(), e);
+                super::load::validate_camera(&cam).map_err(|e| reindex(i, e))?;
+            }
+            Edit::Material { name, material } => {
+                scene
+                    .material_names
+                    .iter()
+                    .position(|n| n == name)
+                    .ok_or_else(|| err(i, ".name", format!("unknown material '{name}'")))?;
+                validate_material("material", material).map_err(|e| reindex(i, e))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Validates and applies a batch. On error nothing is changed.
+pub fn apply(scene: &mut Scene, edits: Vec<Edit>) -> Result<SceneDelta, SceneError> {
+    let received = edits.len();
+    let (edits, coalesced) = coalesce(edits);
+    validate_coalesced(scene, &edits)?;
+
+    // Apply, recording old and new placement.
+    let mut delta = SceneDelta { received, coalesced, ..SceneDelta::default() };
+    for (_, e) in edits {
+        match e {
+            Edit::Object { name, transform } => {
+                let idx = scene.object_index(&name).unwrap_or_default();
+                let old_xf = scene.objects[idx].world_from_object;
+                let old_bounds = Aabb::of_points(scene.objects[idx].world_positions.iter().copied());
+                scene.set_object_transform(idx, transform);
+                let o = &scene.objects[idx];
+                delta.moved.push(MovedSurface {
+                    surface: SurfaceId::Object(idx as u32),
+                    old_world_from_object: old_xf,
+                    new_world_from_object: o.world_from_object,
+                    old_bounds,
+                    new_bounds: Aabb::of_points(o.world_positions.iter().copied()),
+                });
+            }
+            Edit::Light { name, transform, emitter } => {
+                let idx = scene.light_index(&name).unwrap_or_default();
+                let old = scene.desc().lights[idx].clone();
+                let old_bounds = light_bounds(scene, idx);
+                let trs = transform.unwrap_or(old.transform);
+                scene.set_light(idx, trs, emitter.unwrap_or(old.emitter.clone()));
+                if trs != old.transform && scene.lights[idx].mesh.is_some() {
+                    delta.moved.push(MovedSurface {
+                        surface: SurfaceId::Light(idx as u32),
+                        old_world_from_object: old.transform.world_from_object(),
+                        new_world_from_object: trs.world_from_object(),
+                        old_bounds,
+                        new_bounds: light_bounds(scene, idx),
+                    });
+                }
+                delta.lights.push(idx);
+            }
+            e @ Edit::Camera { .. } => {
+                let cam = merged_camera(scene.desc().camera.clone(), &e);
+                scene.set_camera(cam);
+                delta.camera = true;
+            }
+            Edit::Material { name, material } => {
+                let idx = scene.material_names.iter().position(|n| *n == name).unwrap_or_default();
+                scene.set_material(idx, material);
+                delta.materials.push(idx);
+            }
+        }
+    }
+    Ok(delta)
+}
+
+fn light_bounds(scene: &Scene, idx: usize) -> Aabb {
+    match &scene.lights[idx].geometry {
+        super::LightGeometry::Area { triangles, .. } => Aabb::of_points(triangles.iter().flatten().copied()),
+        _ => {
+            let p = scene.desc().lights[idx].transform.translation();
+            Aabb { min: p, max: p }
+        }
+    }
+}
+
+fn merged_camera(mut cam: CameraDesc, e: &Edit) -> CameraDesc {
+    if let Edit::Camera { position, look_at, up, vfov_deg } = e {
+        cam.position = position.unwrap_or(cam.position);
+        cam.look_at = look_at.unwrap_or(cam.look_at);
+        cam.up = up.unwrap_or(cam.up);
+        cam.vfov_deg = vfov_deg.unwrap_or(cam.vfov_deg);
+    }
+    cam
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn obj(name: &str, x: f32) -> Edit {
+        Edit::Object { name: name.into(), transform: Trs { translation: [x, 0.0, 0.0], ..Trs::default() } }
+    }
+
+    #[test]
+    fn latest_edit_per_target_wins_and_is_counted() {
+        let (kept, coalesced) = coalesce(vec![obj("a", 1.0), obj("b", 2.0), obj("a", 3.0)]);
+        assert_eq!(coalesced, 1);
+        assert_eq!(kept.len(), 2);
+        assert_eq!(kept[0], (2, obj("a", 3.0)));
+        assert_eq!(kept[1], (1, obj("b", 2.0)));
+    }
+
+    #[test]
+    fn light_edits_merge_field_by_field() {
+        let t = Trs { translation: [1.0, 2.0, 3.0], ..Trs::default() };
+        let em = EmitterDesc::Point { intensity: crate::core::Rgb::splat(2.0) };
+        let (kept, coalesced) = coalesce(vec![
+            Edit::Light { name: "l".into(), transform: Some(t), emitter: None },
+            Edit::Light { name: "l".into(), transform: None, emitter: Some(em.clone()) },
+        ]);
+        assert_eq!(coalesced, 1);
+        assert_eq!(kept[0].1, Edit::Light { name: "l".into(), transform: Some(t), emitter: Some(em) });
+    }
+}

@@ -1,0 +1,180 @@
+//! Lights in world space: emitted power, next-event sampling of incident radiance, and the
+//! solid-angle density of that sampling (for MIS).
+//!
+//! Units follow pbrt-v4: point and spot intensity in W/sr, area radiance in W/(sr·m²), power in W.
+//! Area lights emit from the side their triangles' winding normal faces, and are sampled
+//! uniformly by area over their (tessellated) triangles, so the sampled shape is exactly the
+//! intersectable one.
+use super::model::{EmitterDesc, LightDesc};
+use super::shapes::Mesh;
+use crate::core::sampling::{self, DiscreteDistribution};
+use crate::core::Rgb;
+use glam::{Affine3A, Vec2, Vec3};
+use std::f32::consts::PI;
+
+/// A light's world-space emission geometry.
+#[derive(Clone, Debug)]
+pub enum LightGeometry {
+    Point { position: Vec3, intensity: Rgb },
+    Spot { position: Vec3, axis: Vec3, intensity: Rgb, cos_falloff_start: f32, cos_falloff_end: f32 },
+    Area { radiance: Rgb, triangles: Vec<[Vec3; 3]>, area: f32, by_area: DiscreteDistribution },
+}
+
+/// An incident-radiance sample towards a light.
+#[derive(Clone, Copy, Debug)]
+pub struct IncidentSample {
+    /// Unit direction from the receiving point to the light.
+    pub wi: Vec3,
+    /// Distance to the sampled light point.
+    pub dist: f32,
+    /// Radiance arriving along `wi` (for delta lights, intensity / dist²).
+    pub li: Rgb,
+    /// Solid-angle density; 1 for delta lights.
+    pub pdf: f32,
+    pub delta: bool,
+}
+
+/// The object-space mesh of a light with a shape (`None` for point and spot lights).
+pub fn emitter_mesh(emitter: &EmitterDesc) -> Option<Mesh> {
+    match emitter {
+        EmitterDesc::Rect { .. } => Some(Mesh::quad()),
+        EmitterDesc::Disc { segments, .. } => Some(Mesh::disc(*segments)),
+        EmitterDesc::Point { .. } | EmitterDesc::Spot { .. } => None,
+    }
+}
+
+/// Smoothstep from `lo` to `hi`, as pbrt-v4's spot falloff uses.
+fn smoothstep(x: f32, lo: f32, hi: f32) -> f32 {
+    if lo == hi {
+        return if x < lo { 0.0 } else { 1.0 };
+    }
+    let t = ((x - lo) / (hi - lo)).clamp(0.0, 1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+impl LightGeometry {
+    /// World-space geometry of a validated light description.
+    pub fn new(desc: &LightDesc, mesh: Option<&Mesh>) -> LightGeometry {
+        let xf: Affine3A = desc.transform.world_from_object();
+        let position = desc.transform.translation();
+        match (&desc.emitter, mesh) {
+            (EmitterDesc::Point { intensity }, _) => LightGeometry::Point { position, intensity: *intensity },
+            (EmitterDesc::Spot { intensity, cone_deg, falloff_start_deg }, _) => LightGeometry::Spot {
+                position,
+                axis: (desc.transform.rotation() * Vec3::Z).normalize(),
+                intensity: *intensity,
+                cos_falloff_start: falloff_start_deg.unwrap_or((cone_deg - 5.0).max(0.0)).to_radians().cos(),
+                cos_falloff_end: cone_deg.to_radians().cos(),
+            },
+            (EmitterDesc::Rect { radiance } | EmitterDesc::Disc { radiance, .. }, Some(mesh)) => {
+                let triangles: Vec<[Vec3; 3]> =
+                    (0..mesh.triangles.len()).map(|i| mesh.triangle(i).map(|p| xf.transform_point3(p))).collect();
+                let areas: Vec<f32> =
+                    triangles.iter().map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length()).collect();
+                let area = areas.iter().sum();
+                let by_area = DiscreteDistribution::new(&areas).unwrap_or_default();
+                LightGeometry::Area { radiance: *radiance, triangles, area, by_area }
+            }
+            (EmitterDesc::Rect { radiance } | EmitterDesc::Disc { radiance, .. }, None) => LightGeometry::Area {
+                radiance: *radiance,
+                triangles: Vec::new(),
+                area: 0.0,
+                by_area: DiscreteDistribution::default(),
+            },
+        }
+    }
+
+    /// Total emitted power (W per channel).
+    pub fn power(&self) -> Rgb {
+        match self {
+            LightGeometry::Point { intensity, .. } => *intensity * (4.0 * PI),
+            LightGeometry::Spot { intensity, cos_falloff_start, cos_falloff_end, .. } => {
+                *intensity * (2.0 * PI * (1.0 - 0.5 * (cos_falloff_start + cos_falloff_end)))
+            }
+            LightGeometry::Area { radiance, area, .. } => *radiance * (PI * area),
+        }
+    }
+
+    pub fn is_delta(&self) -> bool {
+        !matches!(self, LightGeometry::Area { .. })
+    }
+
+    /// Samples radiance arriving at `p`. `None` when nothing can arrive (back side, zero area).
+    pub fn sample_incident(&self, p: Vec3, u: Vec2) -> Option<IncidentSample> {
+        match self {
+            LightGeometry::Point { position, intensity } => {
+                let d = *position - p;
+                let dist2 = d.length_squared();
+                (dist2 > 0.0).then(|| {
+                    let dist = dist2.sqrt();
+                    IncidentSample { wi: d / dist, dist, li: *intensity / dist2, pdf: 1.0, delta: true }
+                })
+            }
+            LightGeometry::Spot { position, axis, intensity, cos_falloff_start, cos_falloff_end } => {
+                let d = *position - p;
+                let dist2 = d.length_squared();
+                if dist2 == 0.0 {
+                    return None;
+                }
+                let dist = dist2.sqrt();
+                let wi = d / dist;
+                let falloff = smoothstep(-wi.dot(*axis), *cos_falloff_end, *cos_falloff_start);
+                (falloff > 0.0).then(|| IncidentSample {
+                    wi,
+                    dist,
+                    li: *intensity * (falloff / dist2),
+                    pdf: 1.0,
+                    delta: true,
+                })
+            }
+            LightGeometry::Area { radiance, triangles, area, by_area } => {
+                if by_area.is_empty() {
+                    return None;
+                }
+                let (i, _, u0) = by_area.sample(u.x);
+                let [a, b, c] = triangles[i];
+                let bary = sampling::uniform_triangle(Vec2::new(u0, u.y));
+                let q = a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y;
+                let n = (b - a).cross(c - a).normalize();
+                let d = q - p;
+                let dist2 = d.length_squared();
+                let dist = dist2.sqrt();
+                let wi = d / dist;
+                let cos_l = -n.dot(wi);
+                (cos_l > 0.0 && dist > 0.0).then(|| IncidentSample {
+                    wi,
+                    dist,
+                    li: *radiance,
+                    pdf: dist2 / (cos_l * area),
+                    delta: false,
+                })
+            }
+        }
+    }
+
+    /// Solid-angle density with which [`LightGeometry::sample_incident`] would pick the point `q`
+    /// (unit normal `n_light`) seen from `p`.
+    pub fn pdf_incident(&self, p: Vec3, q: Vec3, n_light: Vec3) -> f32 {
+        match self {
+            LightGeometry::Area { area, .. } if *area > 0.0 => {
+                let d = q - p;
+                let dist2 = d.length_squared();
+                let cos_l = n_light.dot(-d / dist2.sqrt());
+                if cos_l > 0.0 {
+                    dist2 / (cos_l * area)
+                } else {
+                    0.0
+                }
+            }
+            _ => 0.0,
+        }
+    }
+
+    /// Radiance leaving an area light's surface with normal `n` towards `w`.
+    pub fn emitted(&self, n: Vec3, w: Vec3) -> Rgb {
+        match self {
+            LightGeometry::Area { radiance, .. } if n.dot(w) > 0.0 => *radiance,
+            _ => Rgb::BLACK,
+        }
+    }
+}

@@ -1,0 +1,250 @@
+//! Loading and validating scenes. Validation happens here, once: everything later trusts the
+//! model. Every error names the offending field (`objects[2].transform.rotation`) or file and
+//! line; nothing non-finite gets in.
+use super::model::*;
+use super::shapes::Mesh;
+use std::path::{Path, PathBuf};
+use thiserror::Error;
+
+/// Quaternions must have unit length within this tolerance.
+pub const QUATERNION_TOLERANCE: f32 = 1e-3;
+/// Largest accepted image side, in pixels.
+pub const MAX_RESOLUTION: u32 = 16384;
+/// Largest accepted tessellation parameter.
+pub const MAX_SEGMENTS: u32 = 4096;
+
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum SceneError {
+    #[error("cannot read {path}: {message}")]
+    Io { path: String, message: String },
+    #[error("{field}: {message}")]
+    Invalid { field: String, message: String },
+}
+
+pub(crate) fn invalid(field: impl Into<String>, message: impl Into<String>) -> SceneError {
+    SceneError::Invalid { field: field.into(), message: message.into() }
+}
+
+/// Parses scene JSON; errors carry the JSON path of the field and serde's line/column.
+pub fn parse_scene_json(text: &str) -> Result<SceneDesc, SceneError> {
+    parse_json(text)
+}
+
+/// Parses any of the model's JSON documents with the field path in errors.
+pub fn parse_json<T: serde::de::DeserializeOwned>(text: &str) -> Result<T, SceneError> {
+    let de = &mut serde_json::Deserializer::from_str(text);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let field = if path.is_empty() || path == "." { "(document)".to_string() } else { path };
+        invalid(field, e.into_inner().to_string())
+    })
+}
+
+fn check_finite(field: &str, values: &[f32]) -> Result<(), SceneError> {
+    match values.iter().position(|v| !v.is_finite()) {
+        Some(i) => Err(invalid(format!("{field}[{i}]"), format!("{} is not a finite number", values[i]))),
+        None => Ok(()),
+    }
+}
+
+fn check_rgb(field: &str, c: crate::core::Rgb, max: Option<f32>) -> Result<(), SceneError> {
+    check_finite(field, &c.to_array())?;
+    if c.min_component() < 0.0 {
+        return Err(invalid(field, "components must not be negative"));
+    }
+    if let Some(max) = max {
+        if c.max_component() > max {
+            return Err(invalid(field, format!("components must lie in [0, {max}] (energy conservation)")));
+        }
+    }
+    Ok(())
+}
+
+pub fn validate_trs(field: &str, t: &Trs) -> Result<(), SceneError> {
+    check_finite(&format!("{field}.translation"), &t.translation)?;
+    check_finite(&format!("{field}.rotation"), &t.rotation)?;
+    check_finite(&format!("{field}.scale"), &t.scale)?;
+    let len = t.rotation.iter().map(|v| v * v).sum::<f32>().sqrt();
+    if (len - 1.0).abs() > QUATERNION_TOLERANCE {
+        return Err(invalid(
+            format!("{field}.rotation"),
+            format!("quaternion [x, y, z, w] has length {len}, expected 1 (±{QUATERNION_TOLERANCE})"),
+        ));
+    }
+    if let Some(i) = t.scale.iter().position(|s| *s == 0.0) {
+        return Err(invalid(format!("{field}.scale[{i}]"), "scale must not be zero (a zero-length axis)"));
+    }
+    Ok(())
+}
+
+pub fn validate_camera(c: &CameraDesc) -> Result<(), SceneError> {
+    check_finite("camera.position", &c.position)?;
+    check_finite("camera.look_at", &c.look_at)?;
+    check_finite("camera.up", &c.up)?;
+    check_finite("camera.vfov_deg", &[c.vfov_deg])?;
+    let forward = glam::Vec3::from(c.look_at) - glam::Vec3::from(c.position);
+    if forward.length_squared() == 0.0 {
+        return Err(invalid("camera.look_at", "equals camera.position: the view direction has zero length"));
+    }
+    let up = glam::Vec3::from(c.up);
+    if up.length_squared() == 0.0 {
+        return Err(invalid("camera.up", "zero-length vector"));
+    }
+    if forward.normalize().cross(up.normalize()).length() < 1e-4 {
+        return Err(invalid("camera.up", "parallel to the view direction"));
+    }
+    if !(c.vfov_deg > 0.0 && c.vfov_deg < 180.0) {
+        return Err(invalid("camera.vfov_deg", format!("{} is outside (0, 180)", c.vfov_deg)));
+    }
+    for (i, r) in c.resolution.iter().enumerate() {
+        if *r == 0 || *r > MAX_RESOLUTION {
+            return Err(invalid(format!("camera.resolution[{i}]"), format!("{r} is outside 1..={MAX_RESOLUTION}")));
+        }
+    }
+    Ok(())
+}
+
+pub fn validate_material(field: &str, m: &Material) -> Result<(), SceneError> {
+    match m {
+        Material::Diffuse { reflectance } | Material::Mirror { reflectance } => {
+            check_rgb(&format!("{field}.reflectance"), *reflectance, Some(1.0))
+        }
+        Material::Glass { ior } => {
+            check_finite(&format!("{field}.ior"), &[*ior])?;
+            if *ior <= 0.0 {
+                return Err(invalid(format!("{field}.ior"), "index of refraction must be positive"));
+            }
+            Ok(())
+        }
+    }
+}
+
+pub fn validate_emitter(field: &str, e: &EmitterDesc) -> Result<(), SceneError> {
+    match e {
+        EmitterDesc::Point { intensity } => check_rgb(&format!("{field}.intensity"), *intensity, None),
+        EmitterDesc::Spot { intensity, cone_deg, falloff_start_deg } => {
+            check_rgb(&format!("{field}.intensity"), *intensity, None)?;
+            check_finite(&format!("{field}.cone_deg"), &[*cone_deg])?;
+            if !(*cone_deg > 0.0 && *cone_deg < 180.0) {
+                return Err(invalid(format!("{field}.cone_deg"), "half-angle must lie in (0, 180)"));
+            }
+            if let Some(start) = falloff_start_deg {
+                check_finite(&format!("{field}.falloff_start_deg"), &[*start])?;
+                if !(*start >= 0.0 && start <= cone_deg) {
+                    return Err(invalid(format!("{field}.falloff_start_deg"), "must lie in [0, cone_deg]"));
+                }
+            }
+            Ok(())
+        }
+        EmitterDesc::Rect { radiance } => check_rgb(&format!("{field}.radiance"), *radiance, None),
+        EmitterDesc::Disc { radiance, segments } => {
+            check_rgb(&format!("{field}.radiance"), *radiance, None)?;
+            check_segments(&format!("{field}.segments"), *segments)
+        }
+    }
+}
+
+fn check_segments(field: &str, s: u32) -> Result<(), SceneError> {
+    if (3..=MAX_SEGMENTS).contains(&s) {
+        Ok(())
+    } else {
+        Err(invalid(field, format!("{s} is outside 3..={MAX_SEGMENTS}")))
+    }
+}
+
+/// Resolves a mesh path against the scene's folder and refuses anything outside `root`.
+pub fn resolve_mesh_path(field: &str, path: &str, scene_dir: &Path, root: &Path) -> Result<PathBuf, SceneError> {
+    if Path::new(path).is_absolute() {
+        return Err(invalid(field, format!("'{path}' is absolute; mesh paths are relative to the scene file")));
+    }
+    let joined = scene_dir.join(path);
+    let canonical = joined
+        .canonicalize()
+        .map_err(|e| invalid(field, format!("mesh file '{}' not found: {e}", joined.display())))?;
+    let root =
+        root.canonicalize().map_err(|e| SceneError::Io { path: root.display().to_string(), message: e.to_string() })?;
+    if !canonical.starts_with(&root) {
+        return Err(invalid(field, format!("'{path}' escapes the scenes root {}", root.display())));
+    }
+    Ok(canonical)
+}
+
+/// Validates the description and builds each object's mesh; `meshes[i]` belongs to
+/// `desc.objects[i]`. Degenerate triangles are dropped and counted in `dropped`.
+pub fn validate_and_build_meshes(
+    desc: &SceneDesc,
+    scene_dir: &Path,
+    root: &Path,
+) -> Result<(Vec<Mesh>, Vec<(String, usize)>), SceneError> {
+    validate_camera(&desc.camera)?;
+    for (name, m) in &desc.materials {
+        validate_material(&format!("materials.{name}"), m)?;
+    }
+    let mut names = std::collections::HashSet::new();
+    let mut meshes = Vec::with_capacity(desc.objects.len());
+    let mut dropped = Vec::new();
+    let mut cache: std::collections::HashMap<PathBuf, Mesh> = Default::default();
+    for (i, o) in desc.objects.iter().enumerate() {
+        let field = format!("objects[{i}]");
+        if o.name.is_empty() {
+            return Err(invalid(format!("{field}.name"), "must not be empty"));
+        }
+        if !names.insert(o.name.as_str()) {
+            return Err(invalid(format!("{field}.name"), format!("duplicate object name '{}'", o.name)));
+        }
+        if !desc.materials.contains_key(&o.material) {
+            return Err(invalid(format!("{field}.material"), format!("unknown material '{}'", o.material)));
+        }
+        validate_trs(&format!("{field}.transform"), &o.transform)?;
+        let shape_field = format!("{field}.shape");
+        let mut mesh = match &o.shape {
+            ShapeDesc::Mesh { path } => {
+                let file = resolve_mesh_path(&format!("{shape_field}.path"), path, scene_dir, root)?;
+                match cache.get(&file) {
+                    Some(m) => m.clone(),
+                    None => {
+                        let m = Mesh::load_obj(&file).map_err(|e| invalid(format!("{shape_field}.path"), e))?;
+                        cache.insert(file, m.clone());
+                        m
+                    }
+                }
+            }
+            ShapeDesc::Quad => Mesh::quad(),
+            ShapeDesc::Box => Mesh::cube(),
+            ShapeDesc::Sphere { segments } => {
+                check_segments(&format!("{shape_field}.segments"), *segments)?;
+                Mesh::sphere(*segments)
+            }
+            ShapeDesc::Disc { segments } => {
+                check_segments(&format!("{shape_field}.segments"), *segments)?;
+                Mesh::disc(*segments)
+            }
+            ShapeDesc::Cylinder { segments } => {
+                check_segments(&format!("{shape_field}.segments"), *segments)?;
+                Mesh::cylinder(*segments)
+            }
+        };
+        let n = mesh.drop_degenerate();
+        if n > 0 {
+            tracing::warn!("{field} '{}': dropped {n} degenerate triangle(s)", o.name);
+            dropped.push((o.name.clone(), n));
+        }
+        if mesh.triangles.is_empty() {
+            return Err(invalid(shape_field, "mesh is empty (no non-degenerate triangles)"));
+        }
+        meshes.push(mesh);
+    }
+    let mut light_names = std::collections::HashSet::new();
+    for (i, l) in desc.lights.iter().enumerate() {
+        let field = format!("lights[{i}]");
+        if l.name.is_empty() {
+            return Err(invalid(format!("{field}.name"), "must not be empty"));
+        }
+        if !light_names.insert(l.name.as_str()) {
+            return Err(invalid(format!("{field}.name"), format!("duplicate light name '{}'", l.name)));
+        }
+        validate_emitter(&format!("{field}.emitter"), &l.emitter)?;
+        validate_trs(&format!("{field}.transform"), &l.transform)?;
+    }
+    Ok((meshes, dropped))
+}

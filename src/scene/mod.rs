@@ -1,0 +1,265 @@
+//! The scene: the validated model plus the world-space data rendering needs, and the mapping of
+//! every Embree hit back to an (object or light, triangle).
+//!
+//! Units: meters (the Cornell box keeps its published millimetre numbers as scene units: radiance
+//! is scale-invariant), radians, linear Rec.709. Invariants: everything in a `Scene` passed
+//! `load::validate_*`; each object's `world_positions` equal its mesh under `world_from_object`.
+pub mod accel;
+pub mod camera;
+pub mod edits;
+pub mod light;
+pub mod load;
+pub mod material;
+pub mod model;
+pub mod shapes;
+
+pub use accel::SceneAccel;
+pub use camera::Camera;
+pub use light::{IncidentSample, LightGeometry};
+pub use load::SceneError;
+pub use model::{CameraDesc, EmitterDesc, LightDesc, Material, ObjectDesc, SceneDesc, ShapeDesc, Trs};
+pub use shapes::Mesh;
+
+use crate::core::sampling::DiscreteDistribution;
+use glam::{Affine3A, Vec3};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// Which surface a hit landed on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum SurfaceId {
+    Object(u32),
+    Light(u32),
+}
+
+/// A scene object in world space.
+#[derive(Clone, Debug)]
+pub struct SceneObject {
+    pub name: String,
+    pub mesh: Arc<Mesh>,
+    pub material: u32,
+    pub world_from_object: Affine3A,
+    pub dynamic: bool,
+    pub world_positions: Vec<Vec3>,
+    /// World-space surface area (m²).
+    pub area: f32,
+}
+
+/// A light in world space; `mesh` is its object-space shape, if it has one.
+#[derive(Clone, Debug)]
+pub struct SceneLight {
+    pub name: String,
+    pub mesh: Option<Arc<Mesh>>,
+    pub geometry: LightGeometry,
+    pub dynamic: bool,
+}
+
+/// A loaded, validated scene.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    desc: SceneDesc,
+    pub camera: Camera,
+    /// Materials in `desc.materials` name order.
+    pub materials: Vec<Material>,
+    pub material_names: Vec<String>,
+    pub objects: Vec<SceneObject>,
+    pub lights: Vec<SceneLight>,
+    /// Light selection proportional to emitted power (luminance); `None` when nothing emits.
+    pub light_selection: Option<DiscreteDistribution>,
+    /// Degenerate triangles dropped at load, per object name.
+    pub dropped_degenerate: Vec<(String, usize)>,
+}
+
+/// A resolved surface point.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfacePoint {
+    pub p: Vec3,
+    /// Unit geometric normal from the triangle's winding, in world space.
+    pub n: Vec3,
+    pub surface: SurfaceId,
+    pub prim: u32,
+}
+
+fn world_positions(mesh: &Mesh, xf: &Affine3A) -> Vec<Vec3> {
+    mesh.positions.iter().map(|p| xf.transform_point3(*p)).collect()
+}
+
+fn mesh_area(positions: &[Vec3], mesh: &Mesh) -> f32 {
+    mesh.triangles
+        .iter()
+        .map(|&[a, b, c]| {
+            let (a, b, c) = (positions[a as usize], positions[b as usize], positions[c as usize]);
+            0.5 * (b - a).cross(c - a).length()
+        })
+        .sum()
+}
+
+impl Scene {
+    /// Loads a scene file; meshes must lie inside `root` (the scenes folder).
+    pub fn load(path: &Path, root: &Path) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| SceneError::Io { path: path.display().to_string(), message: e.to_string() })?;
+        let desc = load::parse_scene_json(&text)?;
+        let dir = path.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
+        Scene::from_desc(desc, &dir, root)
+    }
+
+    /// Builds a scene from a description whose relative mesh paths resolve against `dir`.
+    pub fn from_desc(desc: SceneDesc, dir: &Path, root: &Path) -> Result<Scene, SceneError> {
+        let (meshes, dropped_degenerate) = load::validate_and_build_meshes(&desc, dir, root)?;
+        let material_names: Vec<String> = desc.materials.keys().cloned().collect();
+        let materials: Vec<Material> = desc.materials.values().cloned().collect();
+        let objects = desc
+            .objects
+            .iter()
+            .zip(meshes)
+            .map(|(o, mesh)| {
+                let xf = o.transform.world_from_object();
+                let world = world_positions(&mesh, &xf);
+                let area = mesh_area(&world, &mesh);
+                let material = material_names.iter().position(|n| *n == o.material).unwrap_or(0) as u32;
+                SceneObject {
+                    name: o.name.clone(),
+                    mesh: Arc::new(mesh),
+                    material,
+                    world_from_object: xf,
+                    dynamic: o.dynamic,
+                    world_positions: world,
+                    area,
+                }
+            })
+            .collect();
+        let lights = desc
+            .lights
+            .iter()
+            .map(|l| {
+                let mesh = light::emitter_mesh(&l.emitter).map(Arc::new);
+                SceneLight {
+                    name: l.name.clone(),
+                    geometry: LightGeometry::new(l, mesh.as_deref()),
+                    mesh,
+                    dynamic: l.dynamic,
+                }
+            })
+            .collect();
+        let mut scene = Scene {
+            camera: Camera::from_desc(&desc.camera),
+            desc,
+            materials,
+            material_names,
+            objects,
+            lights,
+            light_selection: None,
+            dropped_degenerate,
+        };
+        scene.update_light_selection();
+        Ok(scene)
+    }
+
+    /// The current scene description (edits are reflected in it).
+    pub fn desc(&self) -> &SceneDesc {
+        &self.desc
+    }
+
+    fn update_light_selection(&mut self) {
+        let weights: Vec<f32> = self.lights.iter().map(|l| l.geometry.power().luminance()).collect();
+        self.light_selection = DiscreteDistribution::new(&weights);
+    }
+
+    /// World-space vertices of triangle `prim` of a surface.
+    pub fn triangle(&self, surface: SurfaceId, prim: u32) -> [Vec3; 3] {
+        match surface {
+            SurfaceId::Object(i) => {
+                let o = &self.objects[i as usize];
+                let [a, b, c] = o.mesh.triangles[prim as usize];
+                [o.world_positions[a as usize], o.world_positions[b as usize], o.world_positions[c as usize]]
+            }
+            SurfaceId::Light(i) => match &self.lights[i as usize].geometry {
+                LightGeometry::Area { triangles, .. } => triangles[prim as usize],
+                _ => [Vec3::ZERO; 3],
+            },
+        }
+    }
+
+    /// The world-space point and normal at barycentrics (`u`, `v`) of a triangle. Interpolating
+    /// world vertices keeps the point's error bounded, as the robust ray offset assumes.
+    pub fn surface_point(&self, surface: SurfaceId, prim: u32, u: f32, v: f32) -> SurfacePoint {
+        let [a, b, c] = self.triangle(surface, prim);
+        let p = a * (1.0 - u - v) + b * u + c * v;
+        let n = (b - a).cross(c - a).normalize_or_zero();
+        SurfacePoint { p, n, surface, prim }
+    }
+
+    /// Area-weighted mean reflectance ρ_S of the scene's objects (Novák et al. 2010, §3.3).
+    pub fn mean_reflectance(&self) -> f32 {
+        let (weighted, area) = self.objects.iter().fold((0.0f64, 0.0f64), |(w, a), o| {
+            let rho = self.materials[o.material as usize].mean_reflectance() as f64;
+            (w + rho * o.area as f64, a + o.area as f64)
+        });
+        if area > 0.0 {
+            (weighted / area) as f32
+        } else {
+            0.0
+        }
+    }
+
+    /// The same scene with every diffuse and mirror reflectance multiplied by `factor`, clamped to 1
+    /// (the dark and bright variants of the paper's Table 1).
+    pub fn with_reflectance_scaled(&self, factor: f32) -> Scene {
+        let mut s = self.clone();
+        for m in s.materials.iter_mut().chain(s.desc.materials.values_mut()) {
+            if let Material::Diffuse { reflectance } | Material::Mirror { reflectance } = m {
+                let c = *reflectance * factor;
+                *reflectance = crate::core::Rgb::new(c.r.min(1.0), c.g.min(1.0), c.b.min(1.0));
+            }
+        }
+        s
+    }
+
+    /// Renders at another resolution than the file's camera.
+    pub fn set_resolution(&mut self, width: u32, height: u32) {
+        self.desc.camera.resolution = [width, height];
+        self.camera = self.camera.clone().with_resolution(width, height);
+    }
+
+    pub fn object_index(&self, name: &str) -> Option<usize> {
+        self.objects.iter().position(|o| o.name == name)
+    }
+
+    pub fn light_index(&self, name: &str) -> Option<usize> {
+        self.lights.iter().position(|l| l.name == name)
+    }
+
+    /// Moves an object; the caller has validated `trs` and that the object is dynamic.
+    pub fn set_object_transform(&mut self, index: usize, trs: Trs) {
+        self.desc.objects[index].transform = trs;
+        let o = &mut self.objects[index];
+        o.world_from_object = trs.world_from_object();
+        o.world_positions = world_positions(&o.mesh, &o.world_from_object);
+        o.area = mesh_area(&o.world_positions, &o.mesh);
+    }
+
+    /// Replaces a light's transform and emitter (validated by the caller).
+    pub fn set_light(&mut self, index: usize, trs: Trs, emitter: EmitterDesc) {
+        let desc = &mut self.desc.lights[index];
+        desc.transform = trs;
+        desc.emitter = emitter;
+        let l = &mut self.lights[index];
+        l.geometry = LightGeometry::new(desc, l.mesh.as_deref());
+        self.update_light_selection();
+    }
+
+    /// Replaces the camera (validated by the caller), keeping the render resolution.
+    pub fn set_camera(&mut self, mut camera: CameraDesc) {
+        camera.resolution = self.desc.camera.resolution;
+        self.camera = Camera::from_desc(&camera);
+        self.desc.camera = camera;
+    }
+
+    /// Replaces a material's parameters (validated by the caller).
+    pub fn set_material(&mut self, index: usize, material: Material) {
+        let name = self.material_names[index].clone();
+        self.desc.materials.insert(name, material.clone());
+        self.materials[index] = material;
+    }
+}

@@ -1,0 +1,221 @@
+//! Triangle meshes for every shape: tessellated primitives in their canonical object-space
+//! extents (see `model.rs`) and OBJ files loaded with `tobj`.
+//!
+//! Invariant: triangles are wound so that `(p1-p0)×(p2-p0)` points outward (for closed shapes) or
+//! towards +Z (for flat ones); glass and one-sided lights rely on it.
+use glam::Vec3;
+use std::f32::consts::PI;
+use std::path::Path;
+
+/// An indexed triangle mesh in object space.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Mesh {
+    pub positions: Vec<Vec3>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+impl Mesh {
+    pub fn triangle(&self, i: usize) -> [Vec3; 3] {
+        let [a, b, c] = self.triangles[i];
+        [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
+    }
+
+    /// Removes triangles with zero or non-finite area; returns how many were dropped.
+    pub fn drop_degenerate(&mut self) -> usize {
+        let before = self.triangles.len();
+        let positions = &self.positions;
+        self.triangles.retain(|&[a, b, c]| {
+            let (p0, p1, p2) = (positions[a as usize], positions[b as usize], positions[c as usize]);
+            let area2 = (p1 - p0).cross(p2 - p0).length();
+            area2.is_finite() && area2 > 0.0 && a != b && b != c && a != c
+        });
+        before - self.triangles.len()
+    }
+
+    pub fn quad() -> Mesh {
+        Mesh {
+            positions: vec![
+                Vec3::new(-1.0, -1.0, 0.0),
+                Vec3::new(1.0, -1.0, 0.0),
+                Vec3::new(1.0, 1.0, 0.0),
+                Vec3::new(-1.0, 1.0, 0.0),
+            ],
+            triangles: vec![[0, 1, 2], [0, 2, 3]],
+        }
+    }
+
+    /// The cube [-1,1]³ as 6 outward-facing quads.
+    pub fn cube() -> Mesh {
+        let mut m = Mesh::default();
+        // (normal, u axis, v axis) with u × v = normal, so each face winds outward.
+        let faces = [
+            (Vec3::X, Vec3::Y, Vec3::Z),
+            (Vec3::NEG_X, Vec3::Z, Vec3::Y),
+            (Vec3::Y, Vec3::Z, Vec3::X),
+            (Vec3::NEG_Y, Vec3::X, Vec3::Z),
+            (Vec3::Z, Vec3::X, Vec3::Y),
+            (Vec3::NEG_Z, Vec3::Y, Vec3::X),
+        ];
+        for (n, u, v) in faces {
+            let base = m.positions.len() as u32;
+            for (su, sv) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                m.positions.push(n + u * su + v * sv);
+            }
+            m.triangles.push([base, base + 1, base + 2]);
+            m.triangles.push([base, base + 2, base + 3]);
+        }
+        m
+    }
+
+    /// Unit sphere: `segments` around the equator, `segments / 2` rings.
+    pub fn sphere(segments: u32) -> Mesh {
+        let segs = segments.max(3);
+        let rings = (segs / 2).max(2);
+        let mut m = Mesh::default();
+        for j in 0..=rings {
+            let theta = PI * j as f32 / rings as f32;
+            for i in 0..=segs {
+                let phi = 2.0 * PI * i as f32 / segs as f32;
+                m.positions.push(Vec3::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos()));
+            }
+        }
+        let idx = |j: u32, i: u32| j * (segs + 1) + i;
+        for j in 0..rings {
+            for i in 0..segs {
+                let (a, b, c, d) = (idx(j, i), idx(j + 1, i), idx(j + 1, i + 1), idx(j, i + 1));
+                if j + 1 < rings {
+                    m.triangles.push([a, b, c]);
+                }
+                if j > 0 {
+                    m.triangles.push([a, c, d]);
+                }
+            }
+        }
+        m
+    }
+
+    /// Unit disc in the XY plane facing +Z, as a fan of `segments` triangles.
+    pub fn disc(segments: u32) -> Mesh {
+        let segs = segments.max(3);
+        let mut m = Mesh { positions: vec![Vec3::ZERO], triangles: Vec::new() };
+        for i in 0..segs {
+            let phi = 2.0 * PI * i as f32 / segs as f32;
+            m.positions.push(Vec3::new(phi.cos(), phi.sin(), 0.0));
+        }
+        for i in 0..segs {
+            m.triangles.push([0, 1 + i, 1 + (i + 1) % segs]);
+        }
+        m
+    }
+
+    /// Capped cylinder of radius 1 from z=0 to z=1.
+    pub fn cylinder(segments: u32) -> Mesh {
+        let segs = segments.max(3);
+        let mut m = Mesh::default();
+        for i in 0..segs {
+            let phi = 2.0 * PI * i as f32 / segs as f32;
+            let (x, y) = (phi.cos(), phi.sin());
+            m.positions.push(Vec3::new(x, y, 0.0));
+            m.positions.push(Vec3::new(x, y, 1.0));
+        }
+        let bottom_c = m.positions.len() as u32;
+        m.positions.push(Vec3::ZERO);
+        let top_c = bottom_c + 1;
+        m.positions.push(Vec3::Z);
+        for i in 0..segs {
+            let j = (i + 1) % segs;
+            let (b0, t0, b1, t1) = (2 * i, 2 * i + 1, 2 * j, 2 * j + 1);
+            m.triangles.push([b0, b1, t1]);
+            m.triangles.push([b0, t1, t0]);
+            m.triangles.push([bottom_c, b1, b0]);
+            m.triangles.push([top_c, t0, t1]);
+        }
+        m
+    }
+
+    /// Loads every object of an OBJ file into one mesh (triangulated, positions only).
+    pub fn load_obj(path: &Path) -> Result<Mesh, String> {
+        let options =
+            tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true };
+        let (models, _) =
+            tobj::load_obj(path, &options).map_err(|e| format!("cannot read OBJ {}: {e}", path.display()))?;
+        let mut mesh = Mesh::default();
+        for model in models {
+            let base = mesh.positions.len() as u32;
+            let p = &model.mesh.positions;
+            for (i, v) in p.chunks_exact(3).enumerate() {
+                let v = Vec3::new(v[0], v[1], v[2]);
+                if !v.is_finite() {
+                    return Err(format!(
+                        "{}: vertex {} of object '{}' is not finite",
+                        path.display(),
+                        i + 1,
+                        model.name
+                    ));
+                }
+                mesh.positions.push(v);
+            }
+            for t in model.mesh.indices.chunks_exact(3) {
+                mesh.triangles.push([base + t[0], base + t[1], base + t[2]]);
+            }
+        }
+        Ok(mesh)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn area_and_centroid_winding(m: &Mesh) -> (f32, f32) {
+        // Sum of area and of (outward normal · centroid) for closed shapes centred at the origin.
+        let mut area = 0.0;
+        let mut outward = 0.0;
+        for i in 0..m.triangles.len() {
+            let [a, b, c] = m.triangle(i);
+            let n = (b - a).cross(c - a);
+            area += 0.5 * n.length();
+            outward += n.dot((a + b + c) / 3.0);
+        }
+        (area, outward)
+    }
+
+    #[test]
+    fn closed_primitives_wind_outward_with_the_right_area() {
+        let (a, o) = area_and_centroid_winding(&Mesh::cube());
+        assert!((a - 24.0).abs() < 1e-4 && o > 0.0);
+        let mut s = Mesh::sphere(64);
+        assert_eq!(s.drop_degenerate(), 0);
+        let (a, o) = area_and_centroid_winding(&s);
+        assert!((a - 4.0 * PI).abs() / (4.0 * PI) < 0.01, "sphere area {a}");
+        assert!(o > 0.0);
+        let mut c = Mesh::cylinder(64);
+        for p in &mut c.positions {
+            p.z -= 0.5;
+        }
+        let (a, o) = area_and_centroid_winding(&c);
+        assert!((a - 4.0 * PI).abs() / (4.0 * PI) < 0.01, "cylinder area {a}");
+        assert!(o > 0.0);
+    }
+
+    #[test]
+    fn flat_primitives_face_plus_z() {
+        for m in [Mesh::quad(), Mesh::disc(16)] {
+            for i in 0..m.triangles.len() {
+                let [a, b, c] = m.triangle(i);
+                assert!((b - a).cross(c - a).z > 0.0);
+            }
+        }
+    }
+
+    #[test]
+    fn degenerate_triangles_are_dropped_and_counted() {
+        let mut m = Mesh::quad();
+        m.triangles.push([0, 0, 1]);
+        m.positions.push(Vec3::new(2.0, 2.0, 0.0));
+        m.positions.push(Vec3::new(3.0, 3.0, 0.0));
+        m.triangles.push([0, 4, 5]);
+        assert_eq!(m.drop_degenerate(), 2);
+        assert_eq!(m.triangles.len(), 2);
+    }
+}

@@ -1,0 +1,108 @@
+//! The `Technique` interface every light-transport method implements, its configuration
+//! ([`TechniqueConfig`], serde-tagged by `id`), its typed statistics, and [`build`], the one
+//! factory.
+//!
+//! A technique is driven by the engine once per tick: `update` sees what the edits changed
+//! (verify, invalidate, retrace), then `render` adds samples to the film. Per-tick calls go
+//! through `Box<dyn Technique>`; per-ray variety inside a technique is a closed `enum`.
+pub mod path;
+
+use crate::film::Film;
+use crate::scene::edits::SceneDelta;
+use crate::scene::{Scene, SceneAccel};
+use serde::{Deserialize, Serialize};
+use thiserror::Error;
+
+/// Everything a technique may read during a tick.
+pub struct RenderContext<'a> {
+    pub scene: &'a Scene,
+    pub accel: &'a SceneAccel,
+    /// The session's seed; random streams derive from (seed, tick, pixel, sample).
+    pub seed: u64,
+    pub tick: u64,
+}
+
+#[derive(Debug, Error, Clone, PartialEq)]
+pub enum TechniqueError {
+    #[error("invalid technique configuration: {field}: {message}")]
+    InvalidConfig { field: String, message: String },
+}
+
+/// Rays traced, by kind.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct RayCounts {
+    /// Camera rays.
+    pub primary: u64,
+    /// Closest-hit rays after a scattering event.
+    pub secondary: u64,
+    /// Occlusion rays for next-event estimation.
+    pub shadow: u64,
+}
+
+impl RayCounts {
+    pub fn total(&self) -> u64 {
+        self.primary + self.secondary + self.shadow
+    }
+
+    pub fn merge(self, o: RayCounts) -> RayCounts {
+        RayCounts {
+            primary: self.primary + o.primary,
+            secondary: self.secondary + o.secondary,
+            shadow: self.shadow + o.shadow,
+        }
+    }
+}
+
+/// What one `render` call did.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RenderStats {
+    pub rays: RayCounts,
+    /// Technique-specific figures.
+    pub detail: TechniqueStats,
+}
+
+/// Typed, technique-specific statistics.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "id", rename_all = "snake_case")]
+pub enum TechniqueStats {
+    Path(path::PathStats),
+}
+
+/// Which technique to run, with its parameters. JSON: `{"id": "path", "spp": 4, ...}`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "id", rename_all = "snake_case")]
+pub enum TechniqueConfig {
+    Path(path::PathConfig),
+}
+
+impl TechniqueConfig {
+    pub fn id(&self) -> &'static str {
+        match self {
+            TechniqueConfig::Path(_) => "path",
+        }
+    }
+}
+
+/// A light-transport method driven by the engine, one tick at a time.
+pub trait Technique: Send {
+    fn id(&self) -> &'static str;
+
+    /// Reacts to what changed since the last tick (an empty delta on the first tick). The film
+    /// has already been reset by the engine if anything changed.
+    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError>;
+
+    /// Adds this tick's samples to `film`.
+    fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError>;
+
+    /// An edge-preserving filter the engine applies to the resolved image (previews only).
+    fn preview_filter(&self) -> Option<path::PreviewFilter> {
+        None
+    }
+}
+
+/// The one factory: validates the configuration and builds the technique for `scene`.
+pub fn build(config: &TechniqueConfig, scene: &Scene) -> Result<Box<dyn Technique>, TechniqueError> {
+    match config {
+        TechniqueConfig::Path(c) => Ok(Box::new(path::PathTracer::new(c.clone(), scene)?)),
+    }
+}

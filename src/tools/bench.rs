@@ -1,0 +1,1 @@
+//! Benchmarks (placeholder module filled by `bench rays`).

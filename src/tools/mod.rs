@@ -1,0 +1,19 @@
+//! Command-line tools built on the library: rendering and benchmarks. These use `anyhow`, as
+//! binaries do; the library modules below them return typed errors.
+pub mod bench;
+pub mod render;
+
+use std::path::{Path, PathBuf};
+
+/// A mistake in the command line or its input files (exit code 2).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct UsageError(pub String);
+
+/// The scenes root for a scene file: the nearest ancestor folder named `scenes`, else the
+/// scene's own folder. Mesh paths may not leave it.
+pub fn scenes_root_for(scene: &Path) -> PathBuf {
+    let dir = scene.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
+    let dir = if dir.as_os_str().is_empty() { PathBuf::from(".") } else { dir };
+    dir.ancestors().find(|a| a.file_name().is_some_and(|n| n == "scenes")).map(Path::to_path_buf).unwrap_or(dir)
+}
