@@ -1,23 +1,27 @@
 //! The lane integrator: W paths traced side by side (one per lane of an Embree packet), with
 //! path regeneration (Novák et al. 2010, §3.2).
 //!
-//! Each step traces one closest-hit packet and one occlusion packet for the lanes' current
-//! segments. During the regeneration phase (the first `T_r` steps) a lane whose path ended starts
-//! a new camera path for its pixel at once, so packets stay full; in the closing phase (up to
-//! l_m + 1 more steps) ended lanes idle. Without regeneration every lane traces one path and the
-//! packet runs until its longest path ends.
+//! Each packet (a chunk of W consecutive pixels) owns a queue of `paths_per_pixel` paths for
+//! each of its pixels. Each step traces one closest-hit packet and one occlusion packet for the
+//! lanes' current segments. With regeneration, a lane whose path ended takes the next queued
+//! path at once, so packets stay full while the queue lasts (the regeneration phase); then the
+//! remaining paths finish (the closing phase, at most l_m + 1 steps). Without regeneration, ended
+//! lanes idle until every lane of the packet has ended, and then all W lanes refill together.
+//!
+//! Why a fixed queue rather than restarting the same pixel until T_r steps have passed: with a
+//! step budget, the path that straddles the budget's end is length-biased (the inspection
+//! paradox), and with a handful of paths per pixel the pixel mean keeps that bias (measured:
+//! +1.6% on the furnace). With a fixed count per pixel the estimate is unbiased, and since each
+//! path draws from its own random stream, regeneration on or off gives the identical image.
 //!
 //! Estimator: unidirectional path tracing with next-event estimation; area lights are combined
 //! with BSDF sampling by MIS (power heuristic), point and spot lights are sampled directly;
-//! Russian roulette by throughput from the second bounce. Each finished path adds its radiance
-//! and a count of one to its pixel, so the pixel mean is the ratio of the two sums: including
-//! the path cut by the phase boundary (which Wald's identity requires) keeps it consistent.
+//! Russian roulette by throughput from the second bounce.
 use super::PathStats;
 use crate::core::{offset_ray_origin, sampling::power_heuristic, Rgb, Rng};
 use crate::embree::{Hit, Ray};
 use crate::film::PixelAccum;
 use crate::scene::{Scene, SceneAccel, SurfaceId};
-use crate::technique::RayCounts;
 use glam::Vec3;
 
 /// Widest packet Embree offers.
@@ -31,8 +35,8 @@ const SHADOW_EPSILON: f32 = 1e-4;
 pub struct LaneSettings {
     pub lanes: usize,
     pub regeneration: bool,
-    /// T_r: steps during which ended paths are regenerated.
-    pub regeneration_steps: u32,
+    /// Paths traced per pixel in one pass.
+    pub paths_per_pixel: u32,
     /// l_m: scattering vertices after which a path is forcibly ended.
     pub max_path_length: u32,
 }
@@ -41,6 +45,8 @@ pub struct LaneSettings {
 #[derive(Clone)]
 struct Lane {
     active: bool,
+    /// Pixel offset within the chunk.
+    pixel: usize,
     rng: Rng,
     ray: Ray,
     beta: Rgb,
@@ -58,7 +64,59 @@ struct Lane {
     path_done: bool,
 }
 
-/// Traces `passes` samples for pixels `first..first + accum.len()` and adds them to `accum`.
+impl Lane {
+    fn idle() -> Lane {
+        Lane {
+            active: false,
+            pixel: 0,
+            rng: Rng::new(0, 0),
+            ray: Ray::new(Vec3::ZERO, Vec3::Z),
+            beta: Rgb::BLACK,
+            radiance: Rgb::BLACK,
+            depth: 0,
+            specular_bounce: false,
+            bsdf_pdf: 0.0,
+            prev_point: Vec3::ZERO,
+            eta_scale: 1.0,
+            pending: Rgb::BLACK,
+            path_done: false,
+        }
+    }
+}
+
+/// The paths a packet still has to start: path k of pixel j, pixel-minor, so the first W lanes
+/// get W different pixels.
+struct PathQueue {
+    first_pixel: usize,
+    pixels: usize,
+    len: usize,
+    next: usize,
+    /// (seed, tick, first sample index of this pass).
+    stream: (u64, u64, u64),
+    paths_per_pixel: u64,
+}
+
+impl PathQueue {
+    /// Starts the next queued path on `lane`; returns false (and idles the lane) when empty.
+    fn start_next(&mut self, lane: &mut Lane, scene: &Scene) -> bool {
+        if self.next >= self.len {
+            lane.active = false;
+            return false;
+        }
+        let (path_index, offset) = (self.next / self.pixels, self.next % self.pixels);
+        self.next += 1;
+        let pixel = self.first_pixel + offset;
+        let (seed, tick, pass) = self.stream;
+        lane.pixel = offset;
+        lane.rng = Rng::for_sample(seed, tick, pixel as u64, pass * self.paths_per_pixel + path_index as u64);
+        let width = scene.camera.width as usize;
+        start_path(lane, scene, pixel % width, pixel / width);
+        true
+    }
+}
+
+/// Traces one pass (`paths_per_pixel` paths each) for pixels `first..first + accum.len()` and
+/// adds them to `accum`. `stream` is (seed, tick, pass).
 pub fn trace_chunk(
     scene: &Scene,
     accel: &SceneAccel,
@@ -67,61 +125,56 @@ pub fn trace_chunk(
     first: usize,
     accum: &mut [PixelAccum],
 ) -> PathStats {
-    let (seed, tick, first_sample) = stream;
-    let width = scene.camera.width as usize;
-    let w = settings.lanes.min(MAX_LANES);
+    let w = settings.lanes.clamp(1, MAX_LANES);
     let mut stats = PathStats::default();
     let committed = accel.scene();
-    let blank = Lane {
-        active: false,
-        rng: Rng::new(0, 0),
-        ray: Ray::new(Vec3::ZERO, Vec3::Z),
-        beta: Rgb::BLACK,
-        radiance: Rgb::BLACK,
-        depth: 0,
-        specular_bounce: false,
-        bsdf_pdf: 0.0,
-        prev_point: Vec3::ZERO,
-        eta_scale: 1.0,
-        pending: Rgb::BLACK,
-        path_done: false,
+    let mut queue = PathQueue {
+        first_pixel: first,
+        pixels: accum.len(),
+        len: accum.len() * settings.paths_per_pixel as usize,
+        next: 0,
+        stream,
+        paths_per_pixel: settings.paths_per_pixel as u64,
     };
-    let mut lanes: Vec<Lane> = vec![blank; w];
+    let mut lanes: Vec<Lane> = vec![Lane::idle(); w];
     let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); MAX_LANES];
     let mut active = [false; MAX_LANES];
     let mut hits: [Option<Hit>; MAX_LANES] = [None; MAX_LANES];
     let mut shadow_rays = [Ray::new(Vec3::ZERO, Vec3::Z); MAX_LANES];
     let mut shadow_active = [false; MAX_LANES];
     let mut occluded = [false; MAX_LANES];
-    let mut counts = RayCounts::default();
 
-    for (lane_index, lane) in lanes.iter_mut().enumerate().take(accum.len()) {
-        let pixel = first + lane_index;
-        lane.rng = Rng::for_sample(seed, tick, pixel as u64, first_sample);
-        start_path(lane, scene, pixel % width, pixel / width);
-    }
-    let mut step = 0u32;
     loop {
-        let regenerating = settings.regeneration && step < settings.regeneration_steps;
-        let live = lanes.iter().filter(|l| l.active).count();
-        if live == 0 {
-            break;
+        let mut coherent = false;
+        if lanes.iter().all(|l| !l.active) {
+            // Start of the chunk, or (without regeneration) the whole packet has ended: refill.
+            let mut any = false;
+            for lane in lanes.iter_mut() {
+                any |= queue.start_next(lane, scene);
+            }
+            if !any {
+                break;
+            }
+            coherent = true;
         }
+
         // Trace the current segment of every live lane.
+        let mut live = 0;
         for i in 0..w {
             active[i] = lanes[i].active;
             rays[i] = lanes[i].ray;
             if lanes[i].active {
+                live += 1;
                 if lanes[i].depth == 0 {
-                    counts.primary += 1;
+                    stats.rays.primary += 1;
                 } else {
-                    counts.secondary += 1;
+                    stats.rays.secondary += 1;
                 }
             }
         }
         stats.lane_steps += w as u64;
-        stats.active_lane_steps += live as u64;
-        committed.intersect_lanes(&rays[..w], &active[..w], step == 0, &mut hits[..w]);
+        stats.active_lane_steps += live;
+        committed.intersect_lanes(&rays[..w], &active[..w], coherent, &mut hits[..w]);
 
         // Shade: emission, next-event estimation, BSDF sampling, Russian roulette.
         for i in 0..w {
@@ -130,7 +183,7 @@ pub fn trace_chunk(
                 if let Some(shadow) = shade(&mut lanes[i], hits[i], scene, accel, settings.max_path_length) {
                     shadow_rays[i] = shadow;
                     shadow_active[i] = true;
-                    counts.shadow += 1;
+                    stats.rays.shadow += 1;
                 }
             }
         }
@@ -145,21 +198,17 @@ pub fn trace_chunk(
                 lane.radiance += lane.pending;
             }
             if lane.active && lane.path_done {
-                let pixel = &mut accum[i];
+                let pixel = &mut accum[lane.pixel];
                 pixel.add(lane.radiance);
                 pixel.count += 1.0;
                 stats.paths += 1;
-                if regenerating {
-                    let p = first + i;
-                    start_path(lane, scene, p % width, p / width);
-                } else {
-                    lane.active = false;
+                lane.active = false;
+                if settings.regeneration {
+                    queue.start_next(lane, scene);
                 }
             }
         }
-        step += 1;
     }
-    stats.rays = counts;
     stats
 }
 

@@ -1,0 +1,50 @@
+//! Helpers shared by the integration tests: load bundled scenes and run sessions on real Embree.
+#![allow(dead_code)]
+use relume::embree::Device;
+use relume::engine::{thread_pool, Frame, Session};
+use relume::film::LinearImage;
+use relume::scene::Scene;
+use relume::technique::path::PathConfig;
+use relume::technique::TechniqueConfig;
+use std::path::{Path, PathBuf};
+
+pub fn scenes_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")
+}
+
+pub fn load(name: &str) -> Scene {
+    let root = scenes_dir();
+    Scene::load(&root.join(name), &root).unwrap_or_else(|e| panic!("{name}: {e}"))
+}
+
+/// Runs `ticks` ticks of a fresh session on a pool of `threads` and returns the last frame.
+pub fn render(scene: Scene, config: TechniqueConfig, seed: u64, ticks: u32, threads: usize) -> Frame {
+    let pool = thread_pool(threads).expect("thread pool");
+    let device = Device::new(threads).expect("device");
+    pool.install(|| {
+        let mut session = Session::new(scene, &config, seed, &device).expect("session");
+        let mut last = None;
+        for _ in 0..ticks {
+            last = Some(session.tick().expect("tick"));
+        }
+        last.expect("at least one tick")
+    })
+}
+
+pub fn path(spp: u32) -> PathConfig {
+    PathConfig { spp, ..PathConfig::default() }
+}
+
+/// Mean and standard error of the mean over independent batch estimates.
+pub fn mean_and_standard_error(xs: &[f64]) -> (f64, f64) {
+    let n = xs.len() as f64;
+    let mean = xs.iter().sum::<f64>() / n;
+    let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
+    (mean, (var / n).sqrt())
+}
+
+pub fn assert_finite_non_negative(img: &LinearImage) {
+    for (i, p) in img.pixels.iter().enumerate() {
+        assert!(p.is_finite() && p.min_component() >= 0.0, "pixel {i} = {p:?}");
+    }
+}
