@@ -6,7 +6,7 @@
 //!
 //! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
 use clap::{Parser, Subcommand};
-use relume::tools::render;
+use relume::tools::{bench, render};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -24,6 +24,17 @@ struct Cli {
 enum Command {
     /// Render a still image or an animation through the engine's tick pipeline.
     Render(render::RenderArgs),
+    /// Benchmarks.
+    Bench {
+        #[command(subcommand)]
+        which: BenchCommand,
+    },
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// Raw Embree throughput and the path tracer's ray rate, with and without path regeneration.
+    Rays(bench::RaysArgs),
 }
 
 fn main() -> ExitCode {
@@ -34,6 +45,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Render(args) => render::run(args),
+        Command::Bench { which: BenchCommand::Rays(args) } => bench::rays(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,1 +1,283 @@
-//! Benchmarks (placeholder module filled by `bench rays`).
+//! `relume bench rays`: ray throughput in one run, reported as rates and ratios.
+//!
+//! 1. Raw Embree throughput on the scene: coherent primary rays in 16-wide packets, incoherent
+//!    closest-hit rays (cosine-distributed from first hits) and incoherent occlusion rays (from
+//!    first hits to light samples), single rays on every worker.
+//! 2. The `path` technique's achieved ray rate, as a fraction of the raw incoherent rate.
+//! 3. Path regeneration against none at packet widths 1, 8 and 16 on dark (ρ × 0.5), normal and
+//!    bright (ρ_S ≈ 0.8) variants of the scene, as in Novák et al. (2010), Table 1.
+//!
+//! Each measurement repeats until `--seconds` have passed; only rates in one run are compared.
+use super::render::load_scene;
+use crate::core::{offset_ray_origin, sampling, Rng, ShadingFrame};
+use crate::embree::{Device, Ray};
+use crate::engine::{thread_pool, Session};
+use crate::scene::{Scene, SceneAccel};
+use crate::technique::path::{max_path_length, PathConfig};
+use crate::technique::{TechniqueConfig, TechniqueStats};
+use anyhow::{Context, Result};
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(clap::Args, Debug)]
+pub struct RaysArgs {
+    /// Scene file (JSON).
+    pub scene: PathBuf,
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Minimum wall time per measurement, seconds.
+    #[arg(long, default_value_t = 1.0)]
+    pub seconds: f64,
+    /// Also write the figures as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct RawThroughput {
+    pub coherent_primary_mrays: f64,
+    pub incoherent_closest_mrays: f64,
+    pub incoherent_occlusion_mrays: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct RegenerationRow {
+    pub variant: String,
+    pub mean_reflectance: f32,
+    pub max_path_length: u32,
+    /// Mean path length in segments (rays per path excluding shadow rays).
+    pub mean_path_length: f64,
+    pub packet_width: u32,
+    pub no_regeneration_utilisation: f64,
+    pub no_regeneration_mrays: f64,
+    pub regeneration_utilisation: f64,
+    pub regeneration_mrays: f64,
+    /// Regeneration rays/s ÷ no-regeneration rays/s.
+    pub speedup: f64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct RaysReport {
+    pub scene: String,
+    pub width: u32,
+    pub height: u32,
+    pub threads: usize,
+    pub raw: RawThroughput,
+    /// The default `path` configuration's rate.
+    pub path_mrays: f64,
+    pub path_samples_per_second: f64,
+    /// path_mrays ÷ raw incoherent closest-hit rate.
+    pub path_to_raw_ratio: f64,
+    pub regeneration: Vec<RegenerationRow>,
+}
+
+/// Repeats `f` (which returns rays traced) until `seconds` pass; returns Mrays/s.
+fn rate(seconds: f64, mut f: impl FnMut() -> u64) -> f64 {
+    let start = Instant::now();
+    let mut rays = 0u64;
+    while rays == 0 || start.elapsed().as_secs_f64() < seconds {
+        rays += f();
+    }
+    rays as f64 / start.elapsed().as_secs_f64() / 1e6
+}
+
+/// Incoherent test rays: from first hits of camera rays, cosine-distributed bounce directions
+/// and shadow segments to light samples.
+fn incoherent_rays(scene: &Scene, accel: &SceneAccel) -> (Vec<Ray>, Vec<Ray>) {
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    let mut bounce = Vec::new();
+    let mut shadow = Vec::new();
+    let mut rng = Rng::new(99, 1);
+    for y in 0..h {
+        for x in 0..w {
+            let ray = scene.camera.ray(x as f32 + 0.5, y as f32 + 0.5);
+            let Some(hit) = accel.scene().intersect1(&ray) else { continue };
+            let Some((surface, prim)) = accel.resolve(&hit) else { continue };
+            let sp = scene.surface_point(surface, prim, hit.u, hit.v);
+            let n = if sp.n.dot(ray.dir) < 0.0 { sp.n } else { -sp.n };
+            let origin = offset_ray_origin(sp.p, n);
+            let dir = ShadingFrame::from_normal(n).to_world(sampling::cosine_hemisphere(rng.next_2d()));
+            bounce.push(Ray::new(origin, dir));
+            if let Some(select) = &scene.light_selection {
+                let (li, _, _) = select.sample(rng.next_f32());
+                if let Some(s) = scene.lights[li].geometry.sample_incident(origin, rng.next_2d()) {
+                    shadow.push(Ray::segment(origin, s.wi, s.dist * 0.9999));
+                }
+            }
+        }
+    }
+    (bounce, shadow)
+}
+
+fn raw_throughput(scene: &Scene, accel: &SceneAccel, seconds: f64) -> RawThroughput {
+    let committed = accel.scene();
+    let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
+    let coherent = rate(seconds, || {
+        (0..h)
+            .into_par_iter()
+            .map(|y| {
+                let mut n = 0u64;
+                for x0 in (0..w).step_by(16) {
+                    let rays: [Ray; 16] =
+                        std::array::from_fn(|i| scene.camera.ray((x0 + i) as f32 + 0.5, y as f32 + 0.5));
+                    let active: [bool; 16] = std::array::from_fn(|i| x0 + i < w);
+                    let mut hits = [None; 16];
+                    committed.intersect16(&rays, &active, true, &mut hits);
+                    n += active.iter().filter(|a| **a).count() as u64;
+                }
+                n
+            })
+            .sum()
+    });
+    let (bounce, shadow) = incoherent_rays(scene, accel);
+    let closest = rate(seconds, || {
+        bounce.par_iter().map(|r| std::hint::black_box(committed.intersect1(r)).map_or(1, |_| 1)).sum()
+    });
+    let occlusion = rate(seconds, || {
+        shadow
+            .par_iter()
+            .map(|r| {
+                std::hint::black_box(committed.occluded1(r));
+                1
+            })
+            .sum()
+    });
+    RawThroughput {
+        coherent_primary_mrays: coherent,
+        incoherent_closest_mrays: closest,
+        incoherent_occlusion_mrays: occlusion,
+    }
+}
+
+/// Runs `path` with `config` for `seconds`; returns (Mrays/s, paths/s, utilisation, segments per path).
+fn path_rate(scene: &Scene, config: PathConfig, device: &Device, seconds: f64) -> Result<(f64, f64, f64, f64)> {
+    let mut session = Session::new(scene.clone(), &TechniqueConfig::Path(config), 1, device)?;
+    let start = Instant::now();
+    let (mut rays, mut paths, mut lanes, mut active, mut segments) = (0u64, 0u64, 0u64, 0u64, 0u64);
+    while paths == 0 || start.elapsed().as_secs_f64() < seconds {
+        let frame = session.tick()?;
+        rays += frame.stats.rays.total();
+        let TechniqueStats::Path(p) = frame.stats.detail;
+        paths += p.paths;
+        lanes += p.lane_steps;
+        active += p.active_lane_steps;
+        segments += p.rays.primary + p.rays.secondary;
+    }
+    let secs = start.elapsed().as_secs_f64();
+    Ok((
+        rays as f64 / secs / 1e6,
+        paths as f64 / secs,
+        active as f64 / lanes.max(1) as f64,
+        segments as f64 / paths.max(1) as f64,
+    ))
+}
+
+pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
+    let scene = load_scene(&args.scene, args.width, args.height)?;
+    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let pool = thread_pool(threads)?;
+    let device = Device::new(threads).context("creating the Embree device")?;
+    let accel = SceneAccel::build(&device, &scene)?;
+    let variants = [("dark", 0.5f32), ("normal", 1.0), ("bright", 0.8 / scene.mean_reflectance().max(1e-3))];
+    let widths = [1u32, 8, 16];
+    let bar = ProgressBar::new((3 + 1 + variants.len() * widths.len() * 2) as u64);
+    bar.set_style(indicatif::ProgressStyle::with_template("{msg:32} [{bar:30}] {pos}/{len}")?.progress_chars("=> "));
+    pool.install(|| -> Result<RaysReport> {
+        bar.set_message("raw Embree throughput");
+        let raw = raw_throughput(&scene, &accel, args.seconds);
+        bar.inc(3);
+        bar.set_message("path, default configuration");
+        let (path_mrays, path_sps, _, _) = path_rate(&scene, PathConfig::default(), &device, args.seconds)?;
+        bar.inc(1);
+        let mut rows = Vec::new();
+        for (name, factor) in variants {
+            let variant = scene.with_reflectance_scaled(factor);
+            let rho = variant.mean_reflectance();
+            for width in widths {
+                bar.set_message(format!("{name}, {width} lanes"));
+                let base = PathConfig { packet_width: width, ..PathConfig::default() };
+                let (no_rate, _, no_util, seg) =
+                    path_rate(&variant, PathConfig { regeneration: false, ..base.clone() }, &device, args.seconds)?;
+                bar.inc(1);
+                let (pr_rate, _, pr_util, _) =
+                    path_rate(&variant, PathConfig { regeneration: true, ..base }, &device, args.seconds)?;
+                bar.inc(1);
+                rows.push(RegenerationRow {
+                    variant: name.to_string(),
+                    mean_reflectance: rho,
+                    max_path_length: max_path_length(rho, PathConfig::default().admitted_truncation),
+                    mean_path_length: seg,
+                    packet_width: width,
+                    no_regeneration_utilisation: no_util,
+                    no_regeneration_mrays: no_rate,
+                    regeneration_utilisation: pr_util,
+                    regeneration_mrays: pr_rate,
+                    speedup: pr_rate / no_rate,
+                });
+            }
+        }
+        bar.finish_and_clear();
+        Ok(RaysReport {
+            scene: args.scene.display().to_string(),
+            width: scene.camera.width,
+            height: scene.camera.height,
+            threads,
+            path_to_raw_ratio: path_mrays / raw.incoherent_closest_mrays,
+            raw,
+            path_mrays,
+            path_samples_per_second: path_sps,
+            regeneration: rows,
+        })
+    })
+}
+
+pub fn print_table(r: &RaysReport) {
+    println!("relume bench rays: {} at {}x{}, {} threads", r.scene, r.width, r.height, r.threads);
+    println!();
+    println!("raw Embree throughput (Mrays/s)");
+    println!("  coherent primary (16-wide packets)  {:>8.2}", r.raw.coherent_primary_mrays);
+    println!("  incoherent closest hit (single)     {:>8.2}", r.raw.incoherent_closest_mrays);
+    println!("  incoherent occlusion (single)       {:>8.2}", r.raw.incoherent_occlusion_mrays);
+    println!();
+    println!(
+        "path (default configuration)          {:>8.2} Mrays/s, {:.0} paths/s",
+        r.path_mrays, r.path_samples_per_second
+    );
+    println!("  achieved / raw incoherent           {:>8.2}", r.path_to_raw_ratio);
+    println!();
+    println!("regeneration (PR) vs none (NO)");
+    println!("  variant  rho_S  l_m  l_a   lanes  NO util  NO Mrays/s  PR util  PR Mrays/s  speedup");
+    for row in &r.regeneration {
+        println!(
+            "  {:<7} {:>5.2} {:>4} {:>4.1} {:>6} {:>8.2} {:>11.2} {:>8.2} {:>11.2} {:>8.2}",
+            row.variant,
+            row.mean_reflectance,
+            row.max_path_length,
+            row.mean_path_length,
+            row.packet_width,
+            row.no_regeneration_utilisation,
+            row.no_regeneration_mrays,
+            row.regeneration_utilisation,
+            row.regeneration_mrays,
+            row.speedup
+        );
+    }
+}
+
+pub fn rays(args: RaysArgs) -> Result<()> {
+    let report = measure(&args)?;
+    print_table(&report);
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}

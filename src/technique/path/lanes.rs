@@ -1,15 +1,15 @@
 //! The lane integrator: W paths traced side by side (one per lane of an Embree packet), with
 //! path regeneration (Novák et al. 2010, §3.2).
 //!
-//! Each packet (a chunk of W consecutive pixels) owns a queue of `paths_per_pixel` paths for
-//! each of its pixels. Each step traces one closest-hit packet and one occlusion packet for the
-//! lanes' current segments. With regeneration, a lane whose path ended takes the next queued
+//! Each packet owns a queue of consecutive pixels, one path each per pass; the queue is long
+//! enough (`PathTracer::queue_pixels`) to keep the packet busy for about T_r steps. Each step
+//! traces one closest-hit packet and one occlusion packet for the lanes' current segments. With regeneration, a lane whose path ended takes the next queued
 //! path at once, so packets stay full while the queue lasts (the regeneration phase); then the
 //! remaining paths finish (the closing phase, at most l_m + 1 steps). Without regeneration, ended
 //! lanes idle until every lane of the packet has ended, and then all W lanes refill together.
 //!
-//! Why a fixed queue rather than restarting the same pixel until T_r steps have passed: with a
-//! step budget, the path that straddles the budget's end is length-biased (the inspection
+//! Why a queue of pixels rather than restarting the same pixel until T_r steps have passed: with
+//! a step budget, the path that straddles the budget's end is length-biased (the inspection
 //! paradox), and with a handful of paths per pixel the pixel mean keeps that bias (measured:
 //! +1.6% on the furnace). With a fixed count per pixel the estimate is unbiased, and since each
 //! path draws from its own random stream, regeneration on or off gives the identical image.
@@ -35,8 +35,6 @@ const SHADOW_EPSILON: f32 = 1e-4;
 pub struct LaneSettings {
     pub lanes: usize,
     pub regeneration: bool,
-    /// Paths traced per pixel in one pass.
-    pub paths_per_pixel: u32,
     /// l_m: scattering vertices after which a path is forcibly ended.
     pub max_path_length: u32,
 }
@@ -84,16 +82,13 @@ impl Lane {
     }
 }
 
-/// The paths a packet still has to start: path k of pixel j, pixel-minor, so the first W lanes
-/// get W different pixels.
+/// The pixels whose path a packet still has to start in this pass.
 struct PathQueue {
     first_pixel: usize,
-    pixels: usize,
     len: usize,
     next: usize,
-    /// (seed, tick, first sample index of this pass).
+    /// (seed, tick, pass): with the pixel, keys each path's random stream.
     stream: (u64, u64, u64),
-    paths_per_pixel: u64,
 }
 
 impl PathQueue {
@@ -103,20 +98,20 @@ impl PathQueue {
             lane.active = false;
             return false;
         }
-        let (path_index, offset) = (self.next / self.pixels, self.next % self.pixels);
+        let offset = self.next;
         self.next += 1;
         let pixel = self.first_pixel + offset;
         let (seed, tick, pass) = self.stream;
         lane.pixel = offset;
-        lane.rng = Rng::for_sample(seed, tick, pixel as u64, pass * self.paths_per_pixel + path_index as u64);
+        lane.rng = Rng::for_sample(seed, tick, pixel as u64, pass);
         let width = scene.camera.width as usize;
         start_path(lane, scene, pixel % width, pixel / width);
         true
     }
 }
 
-/// Traces one pass (`paths_per_pixel` paths each) for pixels `first..first + accum.len()` and
-/// adds them to `accum`. `stream` is (seed, tick, pass).
+/// Traces one pass (one path per pixel) for pixels `first..first + accum.len()` and adds them to
+/// `accum`. `stream` is (seed, tick, pass).
 pub fn trace_chunk(
     scene: &Scene,
     accel: &SceneAccel,
@@ -128,14 +123,7 @@ pub fn trace_chunk(
     let w = settings.lanes.clamp(1, MAX_LANES);
     let mut stats = PathStats::default();
     let committed = accel.scene();
-    let mut queue = PathQueue {
-        first_pixel: first,
-        pixels: accum.len(),
-        len: accum.len() * settings.paths_per_pixel as usize,
-        next: 0,
-        stream,
-        paths_per_pixel: settings.paths_per_pixel as u64,
-    };
+    let mut queue = PathQueue { first_pixel: first, len: accum.len(), next: 0, stream };
     let mut lanes: Vec<Lane> = vec![Lane::idle(); w];
     let mut rays = [Ray::new(Vec3::ZERO, Vec3::Z); MAX_LANES];
     let mut active = [false; MAX_LANES];

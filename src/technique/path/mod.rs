@@ -5,14 +5,15 @@
 //! Eurographics 2010 short paper (`shared/papers/path-regeneration-interactive-path-tracing.md`).
 //!
 //! # Algorithm
-//! 1. Split the image into chunks of `packet_width` consecutive pixels (one packet each).
-//! 2. Each of `spp` passes queues M = max(1, round(T_r·(1 − ρ_S))) jittered camera paths per
-//!    pixel of the packet: enough to keep a lane busy for about T_r steps.
+//! 1. Split the image into queues of consecutive pixels, one packet of `packet_width` lanes per
+//!    queue. A queue holds W·max(1, round(T_r / l_a)) pixels, l_a = 1/(1 − ρ_S) the expected
+//!    path length in steps, so that it keeps its packet busy for about T_r steps.
+//! 2. Each of `spp` passes traces one jittered camera path per pixel.
 //! 3. Each step traces one closest-hit packet and one shadow packet (`lanes.rs`): emission
 //!    (MIS-weighted for area lights), next-event estimation to one light chosen by power, BSDF
 //!    sampling, Russian roulette by throughput.
 //! 4. Regeneration phase (§3.2): while the packet's queue lasts (about T_r steps), a lane whose
-//!    path ended takes the next queued path at once. Then a closing phase of at most l_m + 1
+//!    path ended takes the next queued pixel's path at once. Then a closing phase of at most l_m + 1
 //!    steps lets the remaining paths finish. With `regeneration: false` the lanes of a packet
 //!    wait for the longest path before all refill together.
 //! 5. Every path is forcibly ended after l_m = ⌈log_{ρ_S} c⌉ scattering vertices (§3.3), ρ_S the
@@ -20,18 +21,18 @@
 //! 6. Paths add (radiance, count 1) to their pixel; the film accumulates across ticks until
 //!    anything changes (progressive refinement, §4).
 //!
-//! Differs from the paper: (a) the regeneration phase hands out a fixed number of paths per
-//! pixel instead of restarting each pixel until T_r steps pass, which made the estimate
-//! length-biased (+1.6% on the furnace; see `lanes.rs`); (b) new paths start with a new camera
+//! Differs from the paper: (a) a lane regenerates the path of the next pixel in its queue, not
+//! another path of its own pixel until T_r steps pass, which made the estimate length-biased
+//! (+1.6% on the furnace; see `lanes.rs`); (b) new paths start with a new camera
 //! ray rather than reusing the previous primary hit (§3.2 option), which keeps anti-aliasing and
 //! costs at most 1/(2 l_a) of the rays.
 //!
 //! # Parameters (defaults)
 //! | field | default | meaning |
 //! |---|---|---|
-//! | `spp` | 1 | passes per tick; each pass is one camera sample per pixel (plus regenerated paths) |
+//! | `spp` | 1 | paths per pixel per tick |
 //! | `regeneration` | true | refill ended lanes during the regeneration phase |
-//! | `regeneration_steps` | 16 | T_r, which sets M, the paths per pixel per pass |
+//! | `regeneration_steps` | 100 | T_r, the regeneration phase in steps (the paper's value); sets the queue length |
 //! | `packet_width` | 8 | lanes per packet: 1 (single rays), 8 or 16 |
 //! | `admitted_truncation` | 0.01 | c, the fraction of paths l_m may cut short |
 //! | `max_path_length` | none | overrides l_m (1 = direct light only) |
@@ -77,7 +78,7 @@ impl Default for PathConfig {
         PathConfig {
             spp: 1,
             regeneration: true,
-            regeneration_steps: 16,
+            regeneration_steps: 100,
             packet_width: 8,
             admitted_truncation: 0.01,
             max_path_length: None,
@@ -115,8 +116,8 @@ pub struct PathStats {
     pub active_lane_steps: u64,
     /// l_m used.
     pub max_path_length: u32,
-    /// M: paths per pixel in each pass (from T_r and ρ_S).
-    pub paths_per_pixel_per_pass: u32,
+    /// Pixels in each packet's queue (from T_r and ρ_S).
+    pub queue_pixels: u32,
     /// ρ_S used for l_m.
     pub mean_reflectance: f32,
 }
@@ -140,11 +141,11 @@ impl PathStats {
     }
 }
 
-/// M, the paths each pixel gets per pass: enough to keep a lane busy for about T_r steps,
-/// since a path takes about l_a = 1/(1 − ρ_S) steps (Novák et al. §5).
-pub fn paths_per_pixel(regeneration_steps: u32, rho: f32) -> u32 {
-    let continue_probability = rho.clamp(0.0, 0.95);
-    ((regeneration_steps as f32 * (1.0 - continue_probability)).round() as u32).max(1)
+/// Pixels per packet queue: W·max(1, round(T_r / l_a)) with l_a = 1/(1 − ρ_S) the expected
+/// path length in steps (Novák et al. §5), so the regeneration phase lasts about T_r steps.
+pub fn queue_pixels(lanes: u32, regeneration_steps: u32, rho: f32) -> u32 {
+    let expected_length = 1.0 / (1.0 - rho.clamp(0.0, 0.95));
+    lanes * ((regeneration_steps as f32 / expected_length).round() as u32).max(1)
 }
 
 fn invalid(field: &str, message: &str) -> TechniqueError {
@@ -224,14 +225,14 @@ impl Technique for PathTracer {
         let settings = LaneSettings {
             lanes: self.config.packet_width as usize,
             regeneration: self.config.regeneration,
-            paths_per_pixel: paths_per_pixel(self.config.regeneration_steps, rho),
             max_path_length: l_m,
         };
+        let queue = queue_pixels(self.config.packet_width, self.config.regeneration_steps, rho);
         let mut total = PathStats::default();
         for _ in 0..self.config.spp {
             let sample = self.passes;
             let stats = film.accumulate_chunks(
-                settings.lanes,
+                queue as usize,
                 |first, chunk| {
                     lanes::trace_chunk(ctx.scene, ctx.accel, &settings, (ctx.seed, ctx.tick, sample), first, chunk)
                 },
@@ -242,7 +243,7 @@ impl Technique for PathTracer {
             film.passes += 1;
         }
         total.max_path_length = l_m;
-        total.paths_per_pixel_per_pass = settings.paths_per_pixel;
+        total.queue_pixels = queue;
         total.mean_reflectance = rho;
         Ok(RenderStats { rays: total.rays, detail: TechniqueStats::Path(total) })
     }
