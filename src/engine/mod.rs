@@ -81,6 +81,11 @@ impl Session {
         &self.scene
     }
 
+    /// The Embree scenes as of the last tick's commit.
+    pub fn accel(&self) -> &SceneAccel {
+        &self.accel
+    }
+
     pub fn config(&self) -> &TechniqueConfig {
         &self.config
     }

@@ -5,6 +5,7 @@
 //! is scale-invariant), radians, linear Rec.709. Invariants: everything in a `Scene` passed
 //! `load::validate_*`; each object's `world_positions` equal its mesh under `world_from_object`.
 pub mod accel;
+pub mod animation;
 pub mod camera;
 pub mod edits;
 pub mod light;

@@ -2,8 +2,9 @@
 //! path the service uses.
 use super::{scenes_root_for, UsageError};
 use crate::embree::Device;
-use crate::engine::{thread_pool, Session};
+use crate::engine::{thread_pool, Frame, Session};
 use crate::film::{write_image, ImageFormat};
+use crate::scene::animation::Animation;
 use crate::scene::Scene;
 use crate::technique::path::PathConfig;
 use crate::technique::TechniqueConfig;
@@ -36,11 +37,21 @@ pub struct RenderArgs {
     /// Exposure in stops for PNG/JPEG output.
     #[arg(long, default_value_t = 0.0)]
     pub exposure: f32,
+    /// Animation to render (NAME.anim.json); --out is then a folder.
+    #[arg(long)]
+    pub anim: Option<PathBuf>,
+    /// Frames to render, spread evenly over the animation's duration.
+    #[arg(long, default_value_t = 24)]
+    pub frames: u32,
+    /// Image format of animation frames.
+    #[arg(long, default_value = "png")]
+    pub format: String,
 }
 
-pub fn technique_config(id: &str) -> Result<TechniqueConfig> {
+/// The technique configuration for a CLI technique id, with `spp` paths per pixel per tick.
+pub fn technique_config(id: &str, spp: u32) -> Result<TechniqueConfig> {
     match id {
-        "path" => Ok(TechniqueConfig::Path(PathConfig::default())),
+        "path" => Ok(TechniqueConfig::Path(PathConfig { spp, ..PathConfig::default() })),
         other => Err(UsageError(format!("unknown technique '{other}' (available: path)")).into()),
     }
 }
@@ -61,48 +72,108 @@ pub fn load_scene(path: &std::path::Path, width: Option<u32>, height: Option<u32
 }
 
 pub fn run(args: RenderArgs) -> Result<()> {
-    let format = ImageFormat::from_path(&args.out).map_err(|e| UsageError(e.to_string()))?;
+    if args.spp == 0 {
+        return Err(UsageError("--spp must be at least 1".into()).into());
+    }
+    match &args.anim {
+        Some(anim) => render_animation(&args, anim),
+        None => render_still(&args),
+    }
+}
+
+fn make_session(args: &RenderArgs, spp_per_tick: u32) -> Result<(Session, rayon::ThreadPool, Device)> {
     let scene = load_scene(&args.scene, args.width, args.height)?;
-    let config = technique_config(&args.technique)?;
+    let config = technique_config(&args.technique, spp_per_tick)?;
     let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     let pool = thread_pool(threads)?;
     let device = Device::new(threads).context("creating the Embree device")?;
-    let (w, h) = (scene.camera.width, scene.camera.height);
-    let mut session = Session::new(scene, &config, args.seed, &device)?;
+    let session = Session::new(scene, &config, args.seed, &device)?;
+    Ok((session, pool, device))
+}
 
-    let bar = ProgressBar::new(args.spp as u64);
+fn bar(len: u64, unit: &str, message: String) -> Result<ProgressBar> {
+    let bar = ProgressBar::new(len);
     bar.set_style(
-        ProgressStyle::with_template("{spinner} {msg} [{bar:30}] {pos}/{len} spp ({eta} left)")?.progress_chars("=> "),
+        ProgressStyle::with_template(&format!(
+            "{{spinner}} {{msg}} [{{bar:30}}] {{pos}}/{{len}} {unit} ({{eta}} left)"
+        ))?
+        .progress_chars("=> "),
     );
-    bar.set_message(format!("{}x{} {}", w, h, args.technique));
-    let mut last = None;
-    let mut rays = 0u64;
+    bar.set_message(message);
+    Ok(bar)
+}
+
+/// A still: one tick per sample, accumulating progressively.
+fn render_still(args: &RenderArgs) -> Result<()> {
+    let format = ImageFormat::from_path(&args.out).map_err(|e| UsageError(e.to_string()))?;
+    let (mut session, pool, _device) = make_session(args, 1)?;
+    let (w, h) = (session.scene().camera.width, session.scene().camera.height);
+    let bar = bar(args.spp as u64, "spp", format!("{w}x{h} {}", args.technique))?;
     let started = std::time::Instant::now();
+    let mut rays = 0u64;
+    let frame = pool.install(|| -> Result<Frame> {
+        let mut last = session.tick()?;
+        rays += last.stats.rays.total();
+        bar.inc(1);
+        for _ in 1..args.spp {
+            last = session.tick()?;
+            rays += last.stats.rays.total();
+            bar.inc(1);
+        }
+        Ok(last)
+    })?;
+    bar.finish_and_clear();
+    let secs = started.elapsed().as_secs_f64();
+    write_image(&frame.image, &args.out, args.exposure)?;
+    let mean = frame.image.mean();
+    eprintln!(
+        "wrote {} ({format:?}): {} spp in {secs:.2} s ({:.1} spp/s), {:.1} Mrays/s, mean radiance [{:.4}, {:.4}, {:.4}]",
+        args.out.display(),
+        frame.spp,
+        frame.spp as f64 / secs,
+        rays as f64 / secs / 1e6,
+        mean.r,
+        mean.g,
+        mean.b
+    );
+    Ok(())
+}
+
+/// An animation: each frame queues the animation's edits at its time and renders one tick.
+fn render_animation(args: &RenderArgs, anim_path: &std::path::Path) -> Result<()> {
+    let format = ImageFormat::from_extension(&args.format).map_err(|e| UsageError(e.to_string()))?;
+    if args.frames == 0 {
+        return Err(UsageError("--frames must be at least 1".into()).into());
+    }
+    let anim = Animation::load(anim_path).map_err(|e| UsageError(format!("{}: {e}", anim_path.display())))?;
+    let (mut session, pool, _device) = make_session(args, args.spp)?;
+    anim.validate(session.scene()).map_err(|e| UsageError(format!("{}: {e}", anim_path.display())))?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let bar = bar(args.frames as u64, "frames", format!("{} x {} spp", args.technique, args.spp))?;
+    let ext = match format {
+        ImageFormat::Png => "png",
+        ImageFormat::Jpeg => "jpg",
+        ImageFormat::Exr => "exr",
+    };
+    let mut total_ms = 0.0;
     pool.install(|| -> Result<()> {
-        for _ in 0..args.spp {
+        for i in 0..args.frames {
+            let t = anim.duration * i as f32 / args.frames as f32;
+            session.queue_edits(anim.edits_at(t))?;
             let frame = session.tick()?;
-            rays += frame.stats.rays.total();
-            last = Some(frame);
+            total_ms += frame.stats.times.total_ms;
+            let file = args.out.join(format!("frame-{i:04}.{ext}"));
+            write_image(&frame.image, &file, args.exposure)?;
             bar.inc(1);
         }
         Ok(())
     })?;
     bar.finish_and_clear();
-    let secs = started.elapsed().as_secs_f64();
-    let frame = last.ok_or_else(|| UsageError("--spp must be at least 1".into()))?;
-    write_image(&frame.image, &args.out, args.exposure)?;
-    let mean = frame.image.mean();
     eprintln!(
-        "wrote {} ({:?}): {} spp, {:.1} paths/pixel, {:.2} s, {:.1} Mrays/s, mean radiance [{:.4}, {:.4}, {:.4}]",
+        "wrote {} frames to {} (mean tick {:.1} ms)",
+        args.frames,
         args.out.display(),
-        format,
-        frame.spp,
-        frame.stats.paths_per_pixel,
-        secs,
-        rays as f64 / secs / 1e6,
-        mean.r,
-        mean.g,
-        mean.b
+        total_ms / args.frames as f64
     );
     Ok(())
 }
