@@ -189,7 +189,7 @@ fn disc_light_pdf_integrates_to_its_projected_solid_angle() {
 fn light_selection_follows_power() {
     let d = sampling::DiscreteDistribution::new(&[1.0, 3.0, 0.0, 6.0]).unwrap();
     let mut rng = Rng::new(1, 2);
-    let mut observed = vec![0u64; 4];
+    let mut observed = [0u64; 4];
     for _ in 0..SAMPLES {
         observed[d.sample(rng.next_f32()).0] += 1;
     }

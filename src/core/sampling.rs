@@ -68,9 +68,7 @@ pub fn uniform_triangle(u: Vec2) -> Vec2 {
 pub fn power_heuristic(pdf_this: f32, pdf_other: f32) -> f32 {
     let a = pdf_this * pdf_this;
     let b = pdf_other * pdf_other;
-    if a == 0.0 {
-        0.0
-    } else if b.is_infinite() {
+    if a == 0.0 || b.is_infinite() {
         0.0
     } else {
         a / (a + b)
@@ -94,7 +92,7 @@ impl DiscreteDistribution {
             acc += if w.is_finite() && w > 0.0 { w as f64 } else { 0.0 };
             cdf.push(acc as f32);
         }
-        (acc > 0.0).then(|| DiscreteDistribution { cdf, total: acc as f32 })
+        (acc > 0.0).then_some(DiscreteDistribution { cdf, total: acc as f32 })
     }
 
     pub fn len(&self) -> usize {

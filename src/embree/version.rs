@@ -16,14 +16,14 @@ pub enum Coherence {
 
 /// Mirrors `rtcInitIntersectContext` from `rtcore_common.h` (Embree 3.13, one instance level).
 pub(crate) fn intersect_context(coherence: Coherence) -> sys::RTCIntersectContext {
-    let mut ctx = sys::RTCIntersectContext::default();
-    ctx.flags = match coherence {
-        Coherence::Coherent => sys::RTC_INTERSECT_CONTEXT_FLAG_COHERENT,
-        Coherence::Incoherent => sys::RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT,
-    };
-    ctx.filter = None;
-    ctx.instID = [sys::RTC_INVALID_GEOMETRY_ID; 1];
-    ctx
+    sys::RTCIntersectContext {
+        flags: match coherence {
+            Coherence::Coherent => sys::RTC_INTERSECT_CONTEXT_FLAG_COHERENT,
+            Coherence::Incoherent => sys::RTC_INTERSECT_CONTEXT_FLAG_INCOHERENT,
+        },
+        filter: None,
+        instID: [sys::RTC_INVALID_GEOMETRY_ID; 1],
+    }
 }
 
 /// Closest hit for one ray. The caller passes a committed scene handle.

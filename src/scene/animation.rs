@@ -158,7 +158,7 @@ impl Animation {
                 return Err(invalid(format!("{field}.keyframes"), "needs at least one keyframe"));
             }
             for (k, w) in times.windows(2).enumerate() {
-                if !(w[1] >= w[0]) {
+                if w[1].is_nan() || w[0].is_nan() || w[1] < w[0] {
                     return Err(invalid(
                         format!("{field}.keyframes[{}].time", k + 1),
                         "keyframe times must not decrease",

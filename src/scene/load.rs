@@ -169,13 +169,16 @@ pub fn resolve_mesh_path(field: &str, path: &str, scene_dir: &Path, root: &Path)
     Ok(canonical)
 }
 
+/// Degenerate triangles dropped at load: (object name, count).
+pub type DroppedTriangles = Vec<(String, usize)>;
+
 /// Validates the description and builds each object's mesh; `meshes[i]` belongs to
-/// `desc.objects[i]`. Degenerate triangles are dropped and counted in `dropped`.
+/// `desc.objects[i]`. Degenerate triangles are dropped and counted.
 pub fn validate_and_build_meshes(
     desc: &SceneDesc,
     scene_dir: &Path,
     root: &Path,
-) -> Result<(Vec<Mesh>, Vec<(String, usize)>), SceneError> {
+) -> Result<(Vec<Mesh>, DroppedTriangles), SceneError> {
     validate_camera(&desc.camera)?;
     for (name, m) in &desc.materials {
         validate_material(&format!("materials.{name}"), m)?;

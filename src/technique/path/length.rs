@@ -10,7 +10,7 @@ pub const MAX_PATH_LENGTH: u32 = 64;
 /// l_m for mean reflectance `rho` and admitted truncated fraction `c`, clamped to
 /// [`MIN_PATH_LENGTH`, `MAX_PATH_LENGTH`].
 pub fn max_path_length(rho: f32, c: f32) -> u32 {
-    if !(rho > 0.0) || !(c > 0.0) {
+    if rho.is_nan() || c.is_nan() || rho <= 0.0 || c <= 0.0 {
         return MIN_PATH_LENGTH;
     }
     if rho >= 1.0 || c >= 1.0 {

@@ -1,0 +1,159 @@
+//! The `relume` binary end to end: outputs exist and decode, bad input exits 2 with a message.
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn relume() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_relume"))
+}
+
+fn scene(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").join(name)
+}
+
+fn out_dir(tag: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("relume-cli-{}-{tag}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn render_writes_png_and_exr() {
+    let dir = out_dir("still");
+    for ext in ["png", "exr"] {
+        let out = dir.join(format!("cbox.{ext}"));
+        let status = relume()
+            .args([
+                "render",
+                scene("cornell-box.json").to_str().unwrap(),
+                "--spp",
+                "4",
+                "--width",
+                "32",
+                "--height",
+                "24",
+            ])
+            .arg("--out")
+            .arg(&out)
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let bytes = std::fs::read(&out).unwrap();
+        if ext == "png" {
+            let img = image::load_from_memory(&bytes).unwrap();
+            assert_eq!((img.width(), img.height()), (32, 24));
+        } else {
+            assert_eq!(&bytes[..4], &[0x76, 0x2f, 0x31, 0x01], "EXR magic number");
+        }
+    }
+}
+
+#[test]
+fn render_anim_writes_every_frame() {
+    let dir = out_dir("anim");
+    let status = relume()
+        .args([
+            "render",
+            scene("bunnies-2.json").to_str().unwrap(),
+            "--anim",
+            scene("bunnies-2.anim.json").to_str().unwrap(),
+        ])
+        .args(["--frames", "3", "--spp", "1", "--width", "16", "--height", "16", "--out"])
+        .arg(&dir)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    for i in 0..3 {
+        assert!(dir.join(format!("frame-{i:04}.png")).exists(), "frame {i} missing");
+    }
+}
+
+#[test]
+fn bad_input_exits_2_with_a_message() {
+    let dir = out_dir("bad");
+    let bad_scene = dir.join("bad.json");
+    std::fs::write(&bad_scene, r#"{"camera": {"position": [0,0,0]}}"#).unwrap();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec![
+                "render".into(),
+                bad_scene.display().to_string(),
+                "--out".into(),
+                dir.join("x.png").display().to_string(),
+            ],
+            "camera",
+        ),
+        (
+            vec![
+                "render".into(),
+                scene("cornell-box.json").display().to_string(),
+                "--out".into(),
+                dir.join("x.tiff").display().to_string(),
+            ],
+            "tiff",
+        ),
+        (
+            vec![
+                "render".into(),
+                scene("cornell-box.json").display().to_string(),
+                "--technique".into(),
+                "magic".into(),
+                "--out".into(),
+                dir.join("x.png").display().to_string(),
+            ],
+            "unknown technique",
+        ),
+        (
+            vec![
+                "render".into(),
+                scene("nope.json").display().to_string(),
+                "--out".into(),
+                dir.join("x.png").display().to_string(),
+            ],
+            "nope.json",
+        ),
+    ];
+    for (args, words) in cases {
+        let out = relume().args(&args).output().unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(words), "{args:?}: '{stderr}' lacks '{words}'");
+    }
+}
+
+#[test]
+fn bench_rays_reports_rates_and_regeneration_rows() {
+    let json = out_dir("bench").join("rays.json");
+    let out = relume()
+        .args([
+            "bench",
+            "rays",
+            scene("cornell-box.json").to_str().unwrap(),
+            "--width",
+            "24",
+            "--height",
+            "24",
+            "--seconds",
+            "0.02",
+            "--threads",
+            "1",
+            "--json",
+        ])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("regeneration (PR) vs none (NO)"));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    assert!(v["raw"]["incoherent_closest_mrays"].as_f64().unwrap() > 0.0);
+    assert!(v["path_to_raw_ratio"].as_f64().unwrap() > 0.0);
+    let rows = v["regeneration"].as_array().unwrap();
+    assert_eq!(rows.len(), 9, "3 variants × 3 widths");
+    // Utilisation is a ratio of lane counts, not a time: regeneration must raise it at 16 lanes.
+    for row in rows.iter().filter(|r| r["packet_width"] == 16) {
+        assert!(row["regeneration_utilisation"].as_f64() > row["no_regeneration_utilisation"].as_f64(), "{row}");
+    }
+    let rho =
+        |variant: &str| rows.iter().find(|r| r["variant"] == variant).unwrap()["mean_reflectance"].as_f64().unwrap();
+    assert!(rho("dark") < rho("normal") && rho("normal") < rho("bright"));
+}
