@@ -15,4 +15,6 @@ COPY --from=build /src/target/release/relume /usr/local/bin/relume
 COPY --from=build /src/scenes /usr/share/relume/scenes
 WORKDIR /usr/share/relume
 ENTRYPOINT ["relume"]
-CMD ["render", "scenes/cornell-box.json", "--technique", "path", "--spp", "256", "--out", "/tmp/cornell-box.png"]
+EXPOSE 8080
+# Inside a container the service must listen beyond loopback, so it needs RELUME_TOKEN set.
+CMD ["serve", "--addr", "0.0.0.0:8080", "--scenes", "/usr/share/relume/scenes"]

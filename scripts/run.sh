@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The README's run command: installs what is missing, builds the release binary and runs relume
-# on the bundled Cornell box. Extra arguments go to `relume`.
+# The README's run command: installs what is missing, builds the release binary and runs
+# `relume serve` on loopback with the bundled scenes (viewer at http://127.0.0.1:8080/).
+# Extra arguments replace `serve`, e.g. `bash scripts/run.sh render scenes/cornell-box.json ...`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh
@@ -9,4 +10,4 @@ cargo build --release --locked
 if [ $# -gt 0 ]; then
   exec target/release/relume "$@"
 fi
-exec target/release/relume render scenes/cornell-box.json --technique path --spp 256 --out cornell-box.png
+exec target/release/relume serve

@@ -1,7 +1,8 @@
 //! relume: dynamic global illumination with resident light transport.
 //!
 //! # Module map (dependencies point down)
-//! - [`tools`]: command-line tools (render, bench); binaries' code, uses `anyhow`.
+//! - [`tools`]: command-line tools (serve, render, bench); binaries' code, uses `anyhow`.
+//! - [`server`]: axum HTTP + WebSocket over the engine; never touches Embree.
 //! - [`engine`]: [`engine::Session`] owns a scene, its Embree scenes, a technique and a film, and
 //!   runs the tick pipeline drain → apply → commit → update → render → resolve.
 //! - [`technique`]: the [`technique::Technique`] trait, [`technique::TechniqueConfig`] and the
@@ -24,5 +25,6 @@ pub mod embree;
 pub mod engine;
 pub mod film;
 pub mod scene;
+pub mod server;
 pub mod technique;
 pub mod tools;

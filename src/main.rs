@@ -1,12 +1,13 @@
 //! The `relume` binary: thin argument parsing over the library.
 //!
+//! - `relume serve [--addr 127.0.0.1:8080] [--scenes DIR] [--token TOKEN] [--max-sessions N] [--threads T]`
 //! - `relume render SCENE.json --technique path --spp N --out FILE.(png|jpg|exr)`
 //! - `relume render SCENE.json --anim NAME.anim.json --frames N --out DIR/`
 //! - `relume bench rays SCENE.json [--json FILE]`
 //!
 //! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
 use clap::{Parser, Subcommand};
-use relume::tools::{bench, render};
+use relume::tools::{bench, render, serve};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -22,6 +23,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the HTTP/WebSocket service.
+    Serve(serve::ServeArgs),
     /// Render a still image or an animation through the engine's tick pipeline.
     Render(render::RenderArgs),
     /// Benchmarks.
@@ -44,6 +47,7 @@ fn main() -> ExitCode {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Serve(args) => serve::run(args),
         Command::Render(args) => render::run(args),
         Command::Bench { which: BenchCommand::Rays(args) } => bench::rays(args),
     };

@@ -1,7 +1,8 @@
-//! Command-line tools built on the library: rendering and benchmarks. These use `anyhow`, as
+//! Command-line tools built on the library: rendering, benchmarks and the server's entry point. These use `anyhow`, as
 //! binaries do; the library modules below them return typed errors.
 pub mod bench;
 pub mod render;
+pub mod serve;
 
 use std::path::{Path, PathBuf};
 

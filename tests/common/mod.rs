@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests: load bundled scenes and run sessions on real Embree.
 #![allow(dead_code)]
+pub mod server;
 use relume::embree::Device;
 use relume::engine::{thread_pool, Frame, Session};
 use relume::film::LinearImage;

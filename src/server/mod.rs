@@ -1,0 +1,150 @@
+//! The service: axum HTTP + WebSocket over the engine.
+//!
+//! Structure (after the axum examples and mini-redis): [`app`] builds the `Router` from shared
+//! [`AppState`]; [`run`] serves a bound listener until a shutdown future resolves, then drains
+//! every session. `main` only parses flags and calls these.
+//!
+//! Concurrency: handlers are async and never trace rays; each session's CPU work runs on its own
+//! worker thread (`worker.rs`) inside the shared rayon pool. No lock is held across `.await`.
+//! Errors: every client fault is a 4xx JSON `{error, detail}`; internal faults are 500s with a
+//! log line. When a token is configured, every `/v1` route requires `Authorization: Bearer`.
+pub mod error;
+pub mod metrics;
+pub mod protocol;
+pub mod routes;
+pub mod state;
+pub mod worker;
+pub mod ws;
+
+pub use error::ApiError;
+pub use state::{AppState, Limits, ServerConfig};
+
+use axum::extract::{DefaultBodyLimit, Request, State};
+use axum::http::StatusCode;
+use axum::middleware::{self, Next};
+use axum::response::Response;
+use axum::routing::{get, post};
+use axum::Router;
+use routes::Shared;
+use std::future::Future;
+use std::sync::Arc;
+use tower_http::timeout::TimeoutLayer;
+
+/// Rejects `/v1` requests without the configured bearer token (header, or `?token=` for
+/// browsers' WebSockets, which cannot set headers).
+async fn require_token(State(s): State<Shared>, req: Request, next: Next) -> Result<Response, ApiError> {
+    if let Some(token) = &s.config.token {
+        let header_ok = req
+            .headers()
+            .get(axum::http::header::AUTHORIZATION)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.strip_prefix("Bearer "))
+            .is_some_and(|t| constant_time_eq(t.as_bytes(), token.as_bytes()));
+        let query_ok = req
+            .uri()
+            .query()
+            .into_iter()
+            .flat_map(|q| q.split('&'))
+            .filter_map(|kv| kv.strip_prefix("token="))
+            .any(|t| constant_time_eq(t.as_bytes(), token.as_bytes()));
+        if !header_ok && !query_ok {
+            return Err(ApiError::new(
+                StatusCode::UNAUTHORIZED,
+                "unauthorized",
+                "this server requires 'Authorization: Bearer <token>'",
+            ));
+        }
+    }
+    Ok(next.run(req).await)
+}
+
+fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+}
+
+/// Counts every 4xx/5xx answer by its `error` code for `/metrics`.
+async fn count_rejections(State(s): State<Shared>, req: Request, next: Next) -> Response {
+    let resp = next.run(req).await;
+    let status = resp.status();
+    if status.is_client_error() || status.is_server_error() {
+        let reason = match status {
+            StatusCode::BAD_REQUEST => "bad_request",
+            StatusCode::UNAUTHORIZED => "unauthorized",
+            StatusCode::NOT_FOUND => "not_found",
+            StatusCode::REQUEST_TIMEOUT => "timeout",
+            StatusCode::CONFLICT => "session_failed",
+            StatusCode::GONE => "session_closed",
+            StatusCode::PAYLOAD_TOO_LARGE => "too_large",
+            StatusCode::UNPROCESSABLE_ENTITY => "invalid",
+            StatusCode::TOO_MANY_REQUESTS => "too_many_sessions",
+            _ if status.is_server_error() => "internal",
+            _ => "other",
+        };
+        s.metrics.reject(reason);
+    }
+    resp
+}
+
+/// The HTTP application.
+pub fn app(state: Arc<AppState>) -> Router {
+    let limits = state.config.limits.clone();
+    let v1 = Router::new()
+        .route("/scenes", get(routes::list_scenes))
+        .route("/sessions", post(routes::create_session))
+        .route("/sessions/{id}", get(routes::get_session).delete(routes::delete_session))
+        .route("/sessions/{id}/edits", post(routes::post_edits))
+        .route("/sessions/{id}/tick", post(routes::post_tick))
+        .route("/sessions/{id}/stats", get(routes::get_stats))
+        .route("/sessions/{id}/ws", get(ws::upgrade))
+        .route("/sessions/{id}/{file}", get(routes::get_frame))
+        .layer(middleware::from_fn_with_state(state.clone(), require_token));
+    Router::new()
+        .route("/healthz", get(routes::healthz))
+        .route("/metrics", get(routes::metrics))
+        .nest("/v1", v1)
+        .fallback(routes::not_found)
+        .layer(middleware::from_fn_with_state(state.clone(), count_rejections))
+        .layer(DefaultBodyLimit::max(limits.max_body_bytes))
+        .layer(TimeoutLayer::with_status_code(StatusCode::REQUEST_TIMEOUT, limits.request_timeout))
+        .with_state(state)
+}
+
+/// Serves `listener` until `shutdown` resolves, then stops every session.
+pub async fn run(
+    listener: tokio::net::TcpListener,
+    state: Arc<AppState>,
+    shutdown: impl Future<Output = ()> + Send + 'static,
+) -> std::io::Result<()> {
+    let closing = state.shutting_down.clone();
+    let signal = async move {
+        shutdown.await;
+        closing.send_replace(true);
+    };
+    axum::serve(listener, app(state.clone())).with_graceful_shutdown(signal).await?;
+    let drained = state.clone();
+    tokio::task::spawn_blocking(move || drained.drain_blocking()).await.map_err(std::io::Error::other)?;
+    tracing::info!(target: "relume::server", "shut down; all sessions drained");
+    Ok(())
+}
+
+/// Resolves on SIGINT or SIGTERM.
+pub async fn shutdown_signal() {
+    let ctrl_c = async {
+        let _ = tokio::signal::ctrl_c().await;
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        _ = ctrl_c => {},
+        _ = term => {},
+    }
+}

@@ -1,0 +1,233 @@
+//! The wire protocol: HTTP request and response bodies and WebSocket messages, as documented
+//! in `proto/openapi.yaml` and `proto/ws.schema.json`. Shared by the server, the load client
+//! and the tests, so there is one definition of each message.
+use crate::engine::TickStats;
+use crate::scene::edits::Edit;
+use crate::technique::TechniqueConfig;
+use serde::{Deserialize, Serialize};
+
+/// `POST /v1/sessions`. `scene` is a bundled scene's name or an inline scene document.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CreateSession {
+    pub scene: serde_json::Value,
+    #[serde(default)]
+    pub technique: Option<TechniqueConfig>,
+    #[serde(default)]
+    pub width: Option<u32>,
+    #[serde(default)]
+    pub height: Option<u32>,
+    #[serde(default = "default_seed")]
+    pub seed: u64,
+    /// Server-driven ticks per second; `None` for client-driven ticks only.
+    #[serde(default)]
+    pub tick_hz: Option<f32>,
+}
+
+fn default_seed() -> u64 {
+    1
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionLinks {
+    pub frame: String,
+    pub ws: String,
+    pub edits: String,
+    pub tick: String,
+    pub stats: String,
+}
+
+/// A session as `GET /v1/sessions/{id}` and `POST /v1/sessions` report it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionView {
+    pub id: String,
+    /// The bundled scene's name, or `"inline"`.
+    pub scene: String,
+    pub technique: TechniqueConfig,
+    pub width: u32,
+    pub height: u32,
+    pub seed: u64,
+    pub tick_hz: Option<f32>,
+    pub ticks: u64,
+    /// `running` or `failed`.
+    pub state: String,
+    pub failure: Option<String>,
+    pub last_stats: Option<TickStats>,
+    pub links: SessionLinks,
+}
+
+/// `POST /v1/sessions/{id}/edits`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EditBatch {
+    pub edits: Vec<Edit>,
+}
+
+/// The answer to an accepted edit batch: queued for the next tick.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct EditsAccepted {
+    pub queued: usize,
+    /// Edits waiting for the next tick, this batch included.
+    pub pending: usize,
+}
+
+/// `POST /v1/sessions/{id}/tick`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct TickDone {
+    pub stats: TickStats,
+    pub frame_url: String,
+}
+
+/// `GET /v1/sessions/{id}/stats`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct StatsHistory {
+    pub stats: Vec<TickStats>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneEntry {
+    pub name: String,
+    pub animations: Vec<String>,
+}
+
+/// `GET /v1/scenes`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SceneList {
+    pub scenes: Vec<SceneEntry>,
+}
+
+/// Image encodings a client can ask for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FrameFormat {
+    Png,
+    Jpg,
+    Exr,
+    None,
+}
+
+/// WebSocket client → server (JSON text).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case", deny_unknown_fields)]
+pub enum ClientMessage {
+    Edits {
+        edits: Vec<Edit>,
+    },
+    Tick,
+    Subscribe {
+        #[serde(default = "default_frames")]
+        frames: FrameFormat,
+        #[serde(default = "yes")]
+        stats: bool,
+        #[serde(default = "one")]
+        every: u32,
+    },
+    /// The server drives the named animation itself (a file `NAME.anim.json` next to the scene).
+    Play {
+        anim: String,
+        #[serde(default = "unit_speed")]
+        speed: f32,
+    },
+    Pause,
+}
+
+fn default_frames() -> FrameFormat {
+    FrameFormat::Png
+}
+fn yes() -> bool {
+    true
+}
+fn one() -> u32 {
+    1
+}
+fn unit_speed() -> f32 {
+    1.0
+}
+
+/// WebSocket server → client (JSON text). Frames travel as binary messages: see [`FrameHeader`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ServerMessage {
+    Stats { stats: Box<TickStats>, frames_dropped: u64 },
+    EditsAccepted { queued: usize, pending: usize },
+    Error { error: String, detail: String },
+}
+
+/// The header in front of every binary frame message: 32 bytes, little-endian.
+///
+/// | bytes | field |
+/// |---|---|
+/// | 0..4 | magic `RLM1` |
+/// | 4..12 | tick (u64) |
+/// | 12..20 | accumulation id (u64) |
+/// | 20 | format: 0 png, 1 jpg, 2 exr |
+/// | 21..24 | reserved, zero |
+/// | 24..28 | width (u32) |
+/// | 28..32 | height (u32) |
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameHeader {
+    pub tick: u64,
+    pub accumulation_id: u64,
+    pub format: FrameFormat,
+    pub width: u32,
+    pub height: u32,
+}
+
+pub const FRAME_MAGIC: &[u8; 4] = b"RLM1";
+pub const FRAME_HEADER_LEN: usize = 32;
+
+impl FrameHeader {
+    pub fn encode(&self) -> [u8; FRAME_HEADER_LEN] {
+        let mut b = [0u8; FRAME_HEADER_LEN];
+        b[0..4].copy_from_slice(FRAME_MAGIC);
+        b[4..12].copy_from_slice(&self.tick.to_le_bytes());
+        b[12..20].copy_from_slice(&self.accumulation_id.to_le_bytes());
+        b[20] = match self.format {
+            FrameFormat::Png => 0,
+            FrameFormat::Jpg => 1,
+            FrameFormat::Exr => 2,
+            FrameFormat::None => 255,
+        };
+        b[24..28].copy_from_slice(&self.width.to_le_bytes());
+        b[28..32].copy_from_slice(&self.height.to_le_bytes());
+        b
+    }
+
+    /// Parses a header; `None` if the bytes are not a frame message.
+    pub fn decode(b: &[u8]) -> Option<FrameHeader> {
+        if b.len() < FRAME_HEADER_LEN || &b[0..4] != FRAME_MAGIC {
+            return None;
+        }
+        let u64_at = |i: usize| u64::from_le_bytes(b[i..i + 8].try_into().unwrap_or_default());
+        let u32_at = |i: usize| u32::from_le_bytes(b[i..i + 4].try_into().unwrap_or_default());
+        let format = match b[20] {
+            0 => FrameFormat::Png,
+            1 => FrameFormat::Jpg,
+            2 => FrameFormat::Exr,
+            _ => return None,
+        };
+        Some(FrameHeader {
+            tick: u64_at(4),
+            accumulation_id: u64_at(12),
+            format,
+            width: u32_at(24),
+            height: u32_at(28),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_header_round_trips() {
+        let h = FrameHeader { tick: 7, accumulation_id: 3, format: FrameFormat::Jpg, width: 256, height: 128 };
+        let b = h.encode();
+        assert_eq!(FrameHeader::decode(&b), Some(h));
+        assert_eq!(FrameHeader::decode(&b[..10]), None);
+        let mut bad = b;
+        bad[0] = b'X';
+        assert_eq!(FrameHeader::decode(&bad), None);
+    }
+}

@@ -1,0 +1,215 @@
+//! HTTP handlers. Each maps client faults to a 4xx `{error, detail}` and never panics.
+use super::error::ApiError;
+use super::protocol::{CreateSession, EditBatch, SceneList, SessionView, StatsHistory, TickDone};
+use super::state::{view, AppState};
+use crate::film::{encode, ImageFormat};
+use axum::body::{Body, Bytes};
+use axum::extract::{FromRequest, Path, Query, Request, State};
+use axum::http::{header, HeaderValue, StatusCode};
+use axum::response::{IntoResponse, Response};
+use axum::Json;
+use serde::de::DeserializeOwned;
+use serde::Deserialize;
+use std::sync::Arc;
+
+pub type Shared = Arc<AppState>;
+
+/// A JSON body whose errors name the field at fault: 400 for malformed JSON, 422 for a valid
+/// document of the wrong shape, 413 past the body limit.
+pub struct ApiJson<T>(pub T);
+
+impl<T: DeserializeOwned, S: Send + Sync> FromRequest<S> for ApiJson<T> {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, Self::Rejection> {
+        let bytes = Bytes::from_request(req, state).await.map_err(|e| {
+            if e.status() == StatusCode::PAYLOAD_TOO_LARGE {
+                ApiError::too_large(format!("request body: {}", e.body_text()))
+            } else {
+                ApiError::bad_request(format!("request body: {}", e.body_text()))
+            }
+        })?;
+        parse_body(&bytes).map(ApiJson)
+    }
+}
+
+/// Parses JSON with the path of the failing field in the error.
+pub fn parse_body<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let de = &mut serde_json::Deserializer::from_slice(bytes);
+    serde_path_to_error::deserialize(de).map_err(|e| {
+        let path = e.path().to_string();
+        let inner = e.into_inner();
+        let field = if path.is_empty() || path == "." { String::new() } else { format!("{path}: ") };
+        match inner.classify() {
+            serde_json::error::Category::Syntax
+            | serde_json::error::Category::Eof
+            | serde_json::error::Category::Io => {
+                ApiError::new(StatusCode::BAD_REQUEST, "malformed_json", format!("{field}{inner}"))
+            }
+            serde_json::error::Category::Data => ApiError::invalid(format!("{field}{inner}")),
+        }
+    })
+}
+
+pub async fn healthz() -> &'static str {
+    "ok\n"
+}
+
+pub async fn metrics(State(s): State<Shared>) -> Response {
+    let body = s.metrics.render(s.session_count());
+    ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], body).into_response()
+}
+
+pub async fn list_scenes(State(s): State<Shared>) -> Json<SceneList> {
+    Json(SceneList { scenes: s.list_scenes() })
+}
+
+pub async fn create_session(
+    State(s): State<Shared>,
+    ApiJson(req): ApiJson<CreateSession>,
+) -> Result<(StatusCode, Json<SessionView>), ApiError> {
+    let state = s.clone();
+    let view = tokio::task::spawn_blocking(move || state.create_session(req))
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))??;
+    Ok((StatusCode::CREATED, Json(view)))
+}
+
+pub async fn get_session(State(s): State<Shared>, Path(id): Path<String>) -> Result<Json<SessionView>, ApiError> {
+    let entry = s.session(&id)?;
+    Ok(Json(view(&entry)))
+}
+
+pub async fn delete_session(State(s): State<Shared>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+    s.session(&id)?;
+    let state = s.clone();
+    tokio::task::spawn_blocking(move || state.remove_session_blocking(&id))
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))??;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+pub async fn post_edits(
+    State(s): State<Shared>,
+    Path(id): Path<String>,
+    ApiJson(batch): ApiJson<EditBatch>,
+) -> Result<Response, ApiError> {
+    let entry = s.session(&id)?;
+    let limit = s.config.limits.max_edits_per_message;
+    if batch.edits.len() > limit {
+        return Err(ApiError::too_large(format!(
+            "edits: {} edits exceed the limit of {limit} per message",
+            batch.edits.len()
+        )));
+    }
+    s.metrics.edits_received.fetch_add(batch.edits.len() as u64, std::sync::atomic::Ordering::Relaxed);
+    let accepted = entry.handle.edits(batch.edits).await?;
+    Ok((StatusCode::ACCEPTED, Json(accepted)).into_response())
+}
+
+pub async fn post_tick(State(s): State<Shared>, Path(id): Path<String>) -> Result<Json<TickDone>, ApiError> {
+    let entry = s.session(&id)?;
+    let stats = entry.handle.tick().await?;
+    Ok(Json(TickDone { frame_url: format!("/v1/sessions/{id}/frame.png?tick={}", stats.tick), stats }))
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FrameQuery {
+    pub tick: Option<u64>,
+    #[serde(default)]
+    pub exposure: Option<f32>,
+}
+
+pub async fn get_frame(
+    State(s): State<Shared>,
+    Path((id, file)): Path<(String, String)>,
+    query: Result<Query<FrameQuery>, axum::extract::rejection::QueryRejection>,
+) -> Result<Response, ApiError> {
+    let Query(q) = query.map_err(|e| ApiError::invalid(format!("query: {}", e.body_text())))?;
+    let format = match file.as_str() {
+        "frame.png" => ImageFormat::Png,
+        "frame.jpg" => ImageFormat::Jpeg,
+        "frame.exr" => ImageFormat::Exr,
+        _ => {
+            return Err(ApiError::not_found(format!(
+                "no resource '{file}' (frames are frame.png, frame.jpg or frame.exr)"
+            )))
+        }
+    };
+    let exposure = q.exposure.unwrap_or(0.0);
+    if !exposure.is_finite() || exposure.abs() > 32.0 {
+        return Err(ApiError::invalid("exposure: must be a finite number of stops in [-32, 32]"));
+    }
+    let entry = s.session(&id)?;
+    let mut frames = entry.handle.frames.clone();
+    let wanted = q.tick;
+    // Wait (bounded) for the wanted tick; the watch borrow ends inside this block.
+    let waited = tokio::time::timeout(s.config.limits.frame_wait, async {
+        frames
+            .wait_for(|f| match (f, wanted) {
+                (Some(f), Some(t)) => f.tick >= t,
+                (_, None) => true,
+                (None, Some(_)) => false,
+            })
+            .await
+            .map(|f| f.clone())
+    })
+    .await;
+    let frame = match waited {
+        Ok(Ok(Some(f))) => f,
+        Ok(Ok(None)) => {
+            return Err(ApiError::not_found(
+                "no frame yet: POST .../tick first, or ask for ?tick=0 to wait for the first one",
+            ))
+        }
+        Ok(Err(_)) => return Err(ApiError::new(StatusCode::GONE, "session_closed", "the session has shut down")),
+        Err(_) => {
+            return Err(ApiError::new(
+                StatusCode::REQUEST_TIMEOUT,
+                "timeout",
+                format!("tick {} did not arrive within {:?}", wanted.unwrap_or(0), s.config.limits.frame_wait),
+            ))
+        }
+    };
+    let image = frame.clone();
+    let bytes = tokio::task::spawn_blocking(move || encode(&image.image, format, exposure))
+        .await
+        .map_err(|e| ApiError::internal(e.to_string()))?
+        .map_err(|e| ApiError::internal(e.to_string()))?;
+    s.metrics.sent(bytes.len());
+    let mut resp = Response::new(Body::from(bytes));
+    let h = resp.headers_mut();
+    h.insert(header::CONTENT_TYPE, HeaderValue::from_static(format.mime()));
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    h.insert("x-relume-tick", HeaderValue::from(frame.tick));
+    h.insert("x-relume-accumulation-id", HeaderValue::from(frame.accumulation_id));
+    h.insert("x-relume-spp", HeaderValue::from(frame.spp));
+    Ok(resp)
+}
+
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StatsQuery {
+    pub n: Option<usize>,
+}
+
+pub async fn get_stats(
+    State(s): State<Shared>,
+    Path(id): Path<String>,
+    query: Result<Query<StatsQuery>, axum::extract::rejection::QueryRejection>,
+) -> Result<Json<StatsHistory>, ApiError> {
+    let Query(q) = query.map_err(|e| ApiError::invalid(format!("query: {}", e.body_text())))?;
+    let n = q.n.unwrap_or(32);
+    if n == 0 || n > super::worker::STATS_HISTORY {
+        return Err(ApiError::invalid(format!("n: must lie in 1..={}", super::worker::STATS_HISTORY)));
+    }
+    let entry = s.session(&id)?;
+    let history = entry.handle.history.lock().map_err(|_| ApiError::internal("stats lock poisoned"))?;
+    let skip = history.len().saturating_sub(n);
+    Ok(Json(StatsHistory { stats: history.iter().skip(skip).cloned().collect() }))
+}
+
+pub async fn not_found() -> ApiError {
+    ApiError::not_found("no such route (see proto/openapi.yaml)")
+}

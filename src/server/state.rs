@@ -1,0 +1,296 @@
+//! Server state: configuration, limits, the Embree device, the rayon pool and the sessions.
+use super::error::ApiError;
+use super::metrics::Metrics;
+use super::protocol::{CreateSession, SceneEntry, SessionLinks, SessionView};
+use super::worker::SessionHandle;
+use crate::embree::Device;
+use crate::engine::Session;
+use crate::scene::Scene;
+use crate::technique::{path::PathConfig, TechniqueConfig};
+use axum::http::StatusCode;
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, RwLock};
+use std::time::Duration;
+
+/// Limits on what clients may ask for. Each rejection answers 413 (too large) or 422/429.
+#[derive(Clone, Debug)]
+pub struct Limits {
+    pub max_body_bytes: usize,
+    /// Largest image side, and largest pixel count.
+    pub max_side: u32,
+    pub max_pixels: u64,
+    pub max_sessions: usize,
+    pub max_triangles: usize,
+    pub max_edits_per_message: usize,
+    pub max_spp_per_tick: u32,
+    pub max_tick_hz: f32,
+    /// How long `GET frame?tick=N` waits for tick N.
+    pub frame_wait: Duration,
+    pub request_timeout: Duration,
+}
+
+impl Default for Limits {
+    fn default() -> Limits {
+        Limits {
+            max_body_bytes: 8 << 20,
+            max_side: 2048,
+            max_pixels: 1 << 20,
+            max_sessions: 16,
+            max_triangles: 4_000_000,
+            max_edits_per_message: 4096,
+            max_spp_per_tick: 64,
+            max_tick_hz: 120.0,
+            frame_wait: Duration::from_secs(10),
+            request_timeout: Duration::from_secs(60),
+        }
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct ServerConfig {
+    pub scenes_root: PathBuf,
+    pub token: Option<String>,
+    pub threads: usize,
+    pub limits: Limits,
+}
+
+/// What the server remembers about a session besides its worker.
+pub struct SessionEntry {
+    pub id: String,
+    pub scene: String,
+    /// Folder of the scene file, where its animations live (`None` for inline scenes).
+    pub scene_dir: Option<PathBuf>,
+    pub technique: TechniqueConfig,
+    pub width: u32,
+    pub height: u32,
+    pub seed: u64,
+    pub tick_hz: Option<f32>,
+    pub handle: SessionHandle,
+}
+
+pub struct AppState {
+    pub config: ServerConfig,
+    pub metrics: Arc<Metrics>,
+    pub device: Device,
+    pub pool: Arc<rayon::ThreadPool>,
+    pub sessions: RwLock<HashMap<String, Arc<SessionEntry>>>,
+    next_id: AtomicU64,
+    /// Flips to true when the server begins shutting down; WebSocket loops watch it.
+    pub shutting_down: tokio::sync::watch::Sender<bool>,
+}
+
+/// A bundled scene name: letters, digits, `-` and `_`; no path separators.
+pub fn valid_name(name: &str) -> bool {
+    !name.is_empty() && name.len() <= 64 && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+}
+
+impl AppState {
+    pub fn new(config: ServerConfig) -> Result<AppState, crate::engine::EngineError> {
+        let pool = Arc::new(crate::engine::thread_pool(config.threads)?);
+        let device = Device::new(config.threads)?;
+        let (shutting_down, _) = tokio::sync::watch::channel(false);
+        Ok(AppState {
+            config,
+            metrics: Arc::new(Metrics::default()),
+            device,
+            pool,
+            sessions: RwLock::new(HashMap::new()),
+            next_id: AtomicU64::new(1),
+            shutting_down,
+        })
+    }
+
+    pub fn session(&self, id: &str) -> Result<Arc<SessionEntry>, ApiError> {
+        self.sessions
+            .read()
+            .map_err(|_| ApiError::internal("session table lock poisoned"))?
+            .get(id)
+            .cloned()
+            .ok_or_else(|| ApiError::not_found(format!("no session '{id}'")))
+    }
+
+    pub fn session_count(&self) -> usize {
+        self.sessions.read().map(|s| s.len()).unwrap_or(0)
+    }
+
+    /// Bundled scenes (`NAME.json`) with their animations (`NAME*.anim.json`).
+    pub fn list_scenes(&self) -> Vec<SceneEntry> {
+        let mut names: Vec<String> = Vec::new();
+        let mut anims: Vec<String> = Vec::new();
+        if let Ok(dir) = std::fs::read_dir(&self.config.scenes_root) {
+            for entry in dir.flatten() {
+                let file = entry.file_name().to_string_lossy().to_string();
+                if let Some(a) = file.strip_suffix(".anim.json") {
+                    anims.push(a.to_string());
+                } else if let Some(s) = file.strip_suffix(".json") {
+                    names.push(s.to_string());
+                }
+            }
+        }
+        names.sort();
+        anims.sort();
+        names
+            .into_iter()
+            .map(|name| {
+                let animations =
+                    anims.iter().filter(|a| *a == &name || a.starts_with(&format!("{name}-"))).cloned().collect();
+                SceneEntry { name, animations }
+            })
+            .collect()
+    }
+
+    /// Loads, checks against the limits and starts a session. CPU-heavy: call from
+    /// `spawn_blocking`.
+    pub fn create_session(&self, req: CreateSession) -> Result<SessionView, ApiError> {
+        let limits = &self.config.limits;
+        if self.session_count() >= limits.max_sessions {
+            return Err(ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "too_many_sessions",
+                format!("the server holds its maximum of {} sessions", limits.max_sessions),
+            ));
+        }
+        // The scene: a bundled name or an inline document confined to the scenes root.
+        let root = &self.config.scenes_root;
+        let (scene_name, scene_dir, mut scene) = match &req.scene {
+            serde_json::Value::String(name) => {
+                if !valid_name(name) {
+                    return Err(ApiError::invalid(format!(
+                        "scene: '{name}' is not a scene name (letters, digits, '-' and '_')"
+                    )));
+                }
+                let path = root.join(format!("{name}.json"));
+                if !path.is_file() {
+                    return Err(ApiError::not_found(format!("scene: no bundled scene '{name}' (see GET /v1/scenes)")));
+                }
+                let scene = Scene::load(&path, root).map_err(|e| ApiError::invalid(format!("scene '{name}': {e}")))?;
+                (name.clone(), Some(root.clone()), scene)
+            }
+            serde_json::Value::Object(_) => {
+                let desc = crate::scene::load::parse_json(&req.scene.to_string())
+                    .map_err(|e| ApiError::invalid(format!("scene.{e}")))?;
+                (
+                    "inline".to_string(),
+                    None,
+                    Scene::from_desc(desc, root, root).map_err(|e| ApiError::invalid(format!("scene.{e}")))?,
+                )
+            }
+            _ => return Err(ApiError::invalid("scene: expected a scene name (string) or an inline scene (object)")),
+        };
+        let (w, h) = (req.width.unwrap_or(scene.camera.width), req.height.unwrap_or(scene.camera.height));
+        if w == 0 || h == 0 {
+            return Err(ApiError::invalid("width/height: must be at least 1"));
+        }
+        if w > limits.max_side || h > limits.max_side || (w as u64) * (h as u64) > limits.max_pixels {
+            return Err(ApiError::too_large(format!(
+                "width/height: {w}x{h} exceeds the limit ({} per side, {} pixels)",
+                limits.max_side, limits.max_pixels
+            )));
+        }
+        scene.set_resolution(w, h);
+        let triangles: usize = scene.objects.iter().map(|o| o.mesh.triangles.len()).sum::<usize>()
+            + scene.lights.iter().filter_map(|l| l.mesh.as_ref()).map(|m| m.triangles.len()).sum::<usize>();
+        if triangles > limits.max_triangles {
+            return Err(ApiError::too_large(format!(
+                "scene: {triangles} triangles exceed the limit of {}",
+                limits.max_triangles
+            )));
+        }
+        let technique = req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default()));
+        let TechniqueConfig::Path(p) = &technique;
+        if p.spp > limits.max_spp_per_tick {
+            return Err(ApiError::too_large(format!(
+                "technique.spp: {} exceeds the limit of {} per tick",
+                p.spp, limits.max_spp_per_tick
+            )));
+        }
+        if let Some(hz) = req.tick_hz {
+            if !(hz.is_finite() && hz > 0.0 && hz <= limits.max_tick_hz) {
+                return Err(ApiError::invalid(format!("tick_hz: must lie in (0, {}]", limits.max_tick_hz)));
+            }
+        }
+
+        let session = Session::new(scene, &technique, req.seed, &self.device).map_err(|e| match e {
+            crate::engine::EngineError::Technique(t) => ApiError::invalid(format!("technique: {t}")),
+            crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("scene: {s}")),
+            other => ApiError::internal(other.to_string()),
+        })?;
+        let n = self.next_id.fetch_add(1, Ordering::Relaxed);
+        let salt = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos() as u64)
+            .unwrap_or(0);
+        let id = format!("s{n}-{:08x}", crate::core::rng::mix64(salt ^ n) as u32);
+        let handle = SessionHandle::spawn(&id, session, req.tick_hz, self.pool.clone(), self.metrics.clone())
+            .map_err(|e| ApiError::internal(format!("cannot start the session thread: {e}")))?;
+        let entry = Arc::new(SessionEntry {
+            id: id.clone(),
+            scene: scene_name,
+            scene_dir,
+            technique,
+            width: w,
+            height: h,
+            seed: req.seed,
+            tick_hz: req.tick_hz,
+            handle,
+        });
+        self.sessions
+            .write()
+            .map_err(|_| ApiError::internal("session table lock poisoned"))?
+            .insert(id.clone(), entry.clone());
+        self.metrics.sessions_created.fetch_add(1, Ordering::Relaxed);
+        Ok(view(&entry))
+    }
+
+    /// Removes a session and stops its worker (blocking: call from `spawn_blocking`).
+    pub fn remove_session_blocking(&self, id: &str) -> Result<(), ApiError> {
+        let entry = self
+            .sessions
+            .write()
+            .map_err(|_| ApiError::internal("session table lock poisoned"))?
+            .remove(id)
+            .ok_or_else(|| ApiError::not_found(format!("no session '{id}'")))?;
+        entry.handle.shutdown_blocking();
+        Ok(())
+    }
+
+    /// Stops every session (blocking).
+    pub fn drain_blocking(&self) {
+        let all: Vec<Arc<SessionEntry>> =
+            self.sessions.write().map(|mut s| s.drain().map(|(_, e)| e).collect()).unwrap_or_default();
+        for e in all {
+            e.handle.shutdown_blocking();
+        }
+    }
+}
+
+pub fn links(id: &str) -> SessionLinks {
+    SessionLinks {
+        frame: format!("/v1/sessions/{id}/frame.png"),
+        ws: format!("/v1/sessions/{id}/ws"),
+        edits: format!("/v1/sessions/{id}/edits"),
+        tick: format!("/v1/sessions/{id}/tick"),
+        stats: format!("/v1/sessions/{id}/stats"),
+    }
+}
+
+pub fn view(e: &SessionEntry) -> SessionView {
+    let last_stats = e.handle.history.lock().ok().and_then(|h| h.back().cloned());
+    let failure = e.handle.failure();
+    SessionView {
+        id: e.id.clone(),
+        scene: e.scene.clone(),
+        technique: e.technique.clone(),
+        width: e.width,
+        height: e.height,
+        seed: e.seed,
+        tick_hz: e.tick_hz,
+        ticks: last_stats.as_ref().map_or(0, |s| s.tick + 1),
+        state: if failure.is_some() { "failed".into() } else { "running".into() },
+        failure,
+        last_stats,
+        links: links(&e.id),
+    }
+}

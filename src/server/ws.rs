@@ -1,0 +1,175 @@
+//! The WebSocket at `/v1/sessions/{id}/ws`.
+//!
+//! Client → server: JSON text [`ClientMessage`]s (`edits`, `tick`, `subscribe`, `play`,
+//! `pause`). Server → client: JSON text [`ServerMessage`]s (stats, edit acknowledgements,
+//! errors) and binary frames: a 32-byte [`FrameHeader`] followed by the encoded image.
+//!
+//! Watch semantics: a consumer slower than the ticks receives only the newest frame; the frames
+//! it never saw are counted (`frames_dropped` in each stats message and in `/metrics`). Edits are
+//! never dropped: each batch is acknowledged (`edits_accepted`) or answered with an `error`.
+//! A bad message gets an `error` reply and the connection stays open.
+use super::error::ApiError;
+use super::protocol::{ClientMessage, FrameFormat, FrameHeader, ServerMessage};
+use super::routes::{parse_body, Shared};
+use super::state::{valid_name, SessionEntry};
+use crate::film::{encode, ImageFormat};
+use crate::scene::animation::Animation;
+use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
+use axum::extract::{Path, State};
+use axum::response::Response;
+use std::sync::atomic::Ordering;
+use std::sync::Arc;
+
+pub async fn upgrade(
+    State(s): State<Shared>,
+    Path(id): Path<String>,
+    ws: WebSocketUpgrade,
+) -> Result<Response, ApiError> {
+    let entry = s.session(&id)?;
+    Ok(ws.on_upgrade(move |socket| serve(socket, s, entry)))
+}
+
+struct Subscription {
+    frames: FrameFormat,
+    stats: bool,
+    every: u32,
+}
+
+fn error_message(e: &ApiError) -> Message {
+    text(&ServerMessage::Error { error: e.error.to_string(), detail: e.detail.clone() })
+}
+
+fn text(m: &ServerMessage) -> Message {
+    Message::Text(serde_json::to_string(m).unwrap_or_default().into())
+}
+
+async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
+    let mut frames = entry.handle.frames.clone();
+    frames.mark_unchanged();
+    let mut closing = state.shutting_down.subscribe();
+    let mut sub = Subscription { frames: FrameFormat::Png, stats: true, every: 1 };
+    let mut last_seen: Option<u64> = None;
+    let mut dropped = 0u64;
+    loop {
+        tokio::select! {
+            incoming = socket.recv() => {
+                let reply = match incoming {
+                    Some(Ok(Message::Text(t))) => handle(&state, &entry, &mut sub, t.as_bytes()).await,
+                    Some(Ok(Message::Binary(_))) => Some(error_message(&ApiError::bad_request("binary messages are for frames; send JSON text"))),
+                    Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
+                    Some(Ok(_)) => None,
+                };
+                if let Some(r) = reply {
+                    if socket.send(r).await.is_err() {
+                        break;
+                    }
+                }
+            }
+            changed = frames.changed() => {
+                if changed.is_err() {
+                    break;
+                }
+                let Some(frame) = frames.borrow_and_update().clone() else { continue };
+                // Ticks this consumer never saw (skipped because it was slower) are dropped frames.
+                if let Some(prev) = last_seen {
+                    let skipped = frame.tick.saturating_sub(prev + 1);
+                    dropped += skipped;
+                    state.metrics.frames_dropped.fetch_add(skipped, Ordering::Relaxed);
+                }
+                last_seen = Some(frame.tick);
+                if frame.tick % sub.every as u64 != 0 {
+                    continue;
+                }
+                if sub.stats {
+                    let m = text(&ServerMessage::Stats { stats: Box::new(frame.stats.clone()), frames_dropped: dropped });
+                    if let Message::Text(t) = &m {
+                        state.metrics.sent(t.len());
+                    }
+                    if socket.send(m).await.is_err() {
+                        break;
+                    }
+                }
+                let format = match sub.frames {
+                    FrameFormat::Png => ImageFormat::Png,
+                    FrameFormat::Jpg => ImageFormat::Jpeg,
+                    FrameFormat::Exr => ImageFormat::Exr,
+                    FrameFormat::None => continue,
+                };
+                let header = FrameHeader { tick: frame.tick, accumulation_id: frame.accumulation_id, format: sub.frames, width: frame.image.width, height: frame.image.height };
+                let image = frame.clone();
+                let Ok(Ok(bytes)) = tokio::task::spawn_blocking(move || encode(&image.image, format, 0.0)).await else { continue };
+                let mut payload = Vec::with_capacity(bytes.len() + 32);
+                payload.extend_from_slice(&header.encode());
+                payload.extend_from_slice(&bytes);
+                state.metrics.sent(payload.len());
+                if socket.send(Message::Binary(payload.into())).await.is_err() {
+                    break;
+                }
+            }
+            _ = closing.changed() => {
+                let _ = socket.send(Message::Close(None)).await;
+                break;
+            }
+        }
+    }
+}
+
+/// Handles one client message; returns the reply to send, if any.
+async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, bytes: &[u8]) -> Option<Message> {
+    let message: ClientMessage = match parse_body(bytes) {
+        Ok(m) => m,
+        Err(e) => return Some(error_message(&e)),
+    };
+    let outcome: Result<Option<ServerMessage>, ApiError> = match message {
+        ClientMessage::Edits { edits } => {
+            let limit = state.config.limits.max_edits_per_message;
+            if edits.len() > limit {
+                Err(ApiError::too_large(format!(
+                    "edits: {} edits exceed the limit of {limit} per message",
+                    edits.len()
+                )))
+            } else {
+                state.metrics.edits_received.fetch_add(edits.len() as u64, Ordering::Relaxed);
+                entry
+                    .handle
+                    .edits(edits)
+                    .await
+                    .map(|a| Some(ServerMessage::EditsAccepted { queued: a.queued, pending: a.pending }))
+            }
+        }
+        // The frame and stats arrive through the subscription once the tick publishes.
+        ClientMessage::Tick => entry.handle.tick().await.map(|_| None),
+        ClientMessage::Subscribe { frames, stats, every } => {
+            if every == 0 {
+                Err(ApiError::invalid("every: must be at least 1"))
+            } else {
+                *sub = Subscription { frames, stats, every };
+                Ok(None)
+            }
+        }
+        ClientMessage::Play { anim, speed } => play(entry, &anim, speed).await.map(|_| None),
+        ClientMessage::Pause => entry.handle.pause().map(|_| None),
+    };
+    match outcome {
+        Ok(reply) => reply.map(|m| text(&m)),
+        Err(e) => Some(error_message(&e)),
+    }
+}
+
+async fn play(entry: &SessionEntry, name: &str, speed: f32) -> Result<(), ApiError> {
+    if !(speed.is_finite() && speed > 0.0 && speed <= 100.0) {
+        return Err(ApiError::invalid("speed: must lie in (0, 100]"));
+    }
+    if !valid_name(name) {
+        return Err(ApiError::invalid(format!("anim: '{name}' is not an animation name")));
+    }
+    let Some(dir) = &entry.scene_dir else {
+        return Err(ApiError::invalid("anim: inline scenes have no bundled animations"));
+    };
+    let path = dir.join(format!("{name}.anim.json"));
+    if !path.is_file() {
+        return Err(ApiError::not_found(format!("anim: no animation '{name}' (see GET /v1/scenes)")));
+    }
+    let anim = Animation::load(&path).map_err(|e| ApiError::invalid(format!("anim: {e}")))?;
+    entry.handle.play(anim, speed).await
+}

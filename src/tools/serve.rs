@@ -1,0 +1,68 @@
+//! `relume serve`: runs the HTTP/WebSocket service until SIGINT or SIGTERM.
+use super::UsageError;
+use crate::server::{self, AppState, Limits, ServerConfig};
+use anyhow::{Context, Result};
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+#[derive(clap::Args, Debug)]
+pub struct ServeArgs {
+    /// Address to listen on.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub addr: SocketAddr,
+    /// Folder of bundled scenes (and their meshes and animations).
+    #[arg(long, default_value = "scenes")]
+    pub scenes: PathBuf,
+    /// Bearer token required on every /v1 route; required to bind beyond loopback.
+    #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    #[arg(long, default_value_t = 16)]
+    pub max_sessions: usize,
+    /// Rendering threads shared by all sessions (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+/// Checks the flags: a non-loopback address needs a token; the scenes folder must exist.
+pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
+    if !args.addr.ip().is_loopback() && args.token.as_deref().is_none_or(str::is_empty) {
+        return Err(UsageError(format!(
+            "refusing to listen on {} without a token: anyone on the network could drive the server. \
+             Pass --token TOKEN (or set RELUME_TOKEN), or listen on 127.0.0.1",
+            args.addr
+        ))
+        .into());
+    }
+    if !args.scenes.is_dir() {
+        return Err(UsageError(format!("--scenes {}: not a folder", args.scenes.display())).into());
+    }
+    if args.max_sessions == 0 {
+        return Err(UsageError("--max-sessions must be at least 1".into()).into());
+    }
+    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    Ok(ServerConfig {
+        scenes_root: args.scenes.canonicalize().with_context(|| format!("resolving {}", args.scenes.display()))?,
+        token: args.token.clone().filter(|t| !t.is_empty()),
+        threads,
+        limits: Limits { max_sessions: args.max_sessions, ..Limits::default() },
+    })
+}
+
+pub fn run(args: ServeArgs) -> Result<()> {
+    let config = config(&args)?;
+    let runtime = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .context("starting the async runtime")?;
+    runtime.block_on(async move {
+        let state = Arc::new(AppState::new(config)?);
+        let listener =
+            tokio::net::TcpListener::bind(args.addr).await.with_context(|| format!("binding {}", args.addr))?;
+        tracing::info!(target: "relume::server", "listening on http://{}", listener.local_addr()?);
+        eprintln!("relume: serving {} on http://{}/ (Ctrl-C to stop)", args.scenes.display(), listener.local_addr()?);
+        server::run(listener, state, server::shutdown_signal()).await?;
+        Ok(())
+    })
+}

@@ -1,0 +1,61 @@
+//! A real relume server on 127.0.0.1:0 for tests, with an HTTP and a WebSocket client.
+use relume::server::{self, AppState, Limits, ServerConfig};
+use std::net::SocketAddr;
+use std::path::Path;
+use std::sync::Arc;
+use tokio::sync::oneshot;
+
+pub struct TestServer {
+    pub addr: SocketAddr,
+    pub http: reqwest::Client,
+    pub state: Arc<AppState>,
+    stop: Option<oneshot::Sender<()>>,
+    pub done: Option<tokio::task::JoinHandle<std::io::Result<()>>>,
+}
+
+impl TestServer {
+    pub async fn start(token: Option<&str>, limits: Limits) -> TestServer {
+        let config = ServerConfig {
+            scenes_root: Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").canonicalize().unwrap(),
+            token: token.map(str::to_string),
+            threads: 2,
+            limits,
+        };
+        let state = Arc::new(AppState::new(config).expect("server state"));
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let addr = listener.local_addr().unwrap();
+        let (stop, stopped) = oneshot::channel::<()>();
+        let done = tokio::spawn(server::run(listener, state.clone(), async move {
+            let _ = stopped.await;
+        }));
+        TestServer { addr, http: reqwest::Client::new(), state, stop: Some(stop), done: Some(done) }
+    }
+
+    pub fn url(&self, path: &str) -> String {
+        format!("http://{}{path}", self.addr)
+    }
+
+    pub fn ws_url(&self, path: &str) -> String {
+        format!("ws://{}{path}", self.addr)
+    }
+
+    /// Creates a session and returns its id.
+    pub async fn session(&self, body: serde_json::Value) -> String {
+        let r = self.http.post(self.url("/v1/sessions")).json(&body).send().await.unwrap();
+        let status = r.status();
+        let v: serde_json::Value = r.json().await.unwrap();
+        assert_eq!(status, 201, "{v}");
+        v["id"].as_str().unwrap().to_string()
+    }
+
+    /// Signals shutdown and waits for `run` to return (sessions drained).
+    pub async fn shutdown(mut self) -> std::io::Result<()> {
+        if let Some(s) = self.stop.take() {
+            let _ = s.send(());
+        }
+        match self.done.take() {
+            Some(d) => d.await.expect("server task"),
+            None => Ok(()),
+        }
+    }
+}

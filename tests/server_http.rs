@@ -1,0 +1,211 @@
+//! Every HTTP route against a real server on 127.0.0.1:0, and a table of bad inputs that must
+//! each get their 4xx while the server and other sessions stay healthy.
+mod common;
+use common::server::TestServer;
+use relume::server::Limits;
+use serde_json::{json, Value};
+
+fn small(scene: &str) -> Value {
+    json!({"scene": scene, "width": 32, "height": 32})
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_route_answers() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let http = &s.http;
+
+    assert_eq!(http.get(s.url("/healthz")).send().await.unwrap().text().await.unwrap(), "ok\n");
+    let scenes: Value = http.get(s.url("/v1/scenes")).send().await.unwrap().json().await.unwrap();
+    let names: Vec<&str> = scenes["scenes"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
+    assert!(names.contains(&"cornell-box") && names.contains(&"walker"), "{names:?}");
+
+    // Create, inspect.
+    let id = s.session(small("bunnies-1")).await;
+    let v: Value = http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(v["scene"], "bunnies-1");
+    assert_eq!(v["state"], "running");
+    assert_eq!(v["ticks"], 0);
+    assert_eq!(v["technique"]["id"], "path");
+
+    // No frame before the first tick.
+    assert_eq!(http.get(s.url(&format!("/v1/sessions/{id}/frame.png"))).send().await.unwrap().status(), 404);
+
+    // Edits queue; tick applies them and reports the coalesced count.
+    let edit = |x: f32| json!({"target": "object", "name": "bunny-1", "transform": {"translation": [x, 0, 250], "scale": [120, 120, 120]}});
+    let r = http
+        .post(s.url(&format!("/v1/sessions/{id}/edits")))
+        .json(&json!({"edits": [edit(150.0), edit(200.0)]}))
+        .send()
+        .await
+        .unwrap();
+    assert_eq!(r.status(), 202);
+    let acc: Value = r.json().await.unwrap();
+    assert_eq!((acc["queued"].as_u64(), acc["pending"].as_u64()), (Some(2), Some(2)));
+    let tick: Value = http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(tick["stats"]["edits_received"], 2);
+    assert_eq!(tick["stats"]["edits_coalesced"], 1);
+    assert_eq!(tick["stats"]["moved_surfaces"], 1);
+    assert!(tick["frame_url"].as_str().unwrap().contains("frame.png?tick=0"));
+
+    // Frames in three encodings, with tick and accumulation headers.
+    for (file, mime) in [("frame.png", "image/png"), ("frame.jpg", "image/jpeg"), ("frame.exr", "image/x-exr")] {
+        let r = http.get(s.url(&format!("/v1/sessions/{id}/{file}?tick=0"))).send().await.unwrap();
+        assert_eq!(r.status(), 200, "{file}");
+        assert_eq!(r.headers()["content-type"], mime);
+        assert_eq!(r.headers()["x-relume-tick"], "0");
+        assert!(r.headers().contains_key("x-relume-accumulation-id"));
+        let body = r.bytes().await.unwrap();
+        if file != "frame.exr" {
+            let img = image::load_from_memory(&body).unwrap();
+            assert_eq!((img.width(), img.height()), (32, 32));
+        }
+    }
+
+    // Stats history, and GET reflects the ticks.
+    http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
+    let hist: Value =
+        http.get(s.url(&format!("/v1/sessions/{id}/stats?n=5"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(hist["stats"].as_array().unwrap().len(), 2);
+    let v: Value = http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(v["ticks"], 2);
+    assert_eq!(v["last_stats"]["tick"], 1);
+
+    // Metrics count what happened.
+    let m = http.get(s.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    assert!(m.contains("relume_sessions 1"), "{m}");
+    assert!(m.contains("relume_ticks_total 2"));
+    assert!(m.contains("relume_tick_seconds_count 2"));
+    assert!(m.contains("relume_rejected_requests_total{reason=\"not_found\"} 1"));
+
+    // Delete ends it.
+    assert_eq!(http.delete(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().status(), 204);
+    assert_eq!(http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().status(), 404);
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn server_driven_ticks_and_frame_waits() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(json!({"scene": "cornell-box", "width": 16, "height": 16, "tick_hz": 50})).await;
+    // ?tick=3 waits until the server's own clock reaches tick 3.
+    let r = s.http.get(s.url(&format!("/v1/sessions/{id}/frame.png?tick=3"))).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let tick: u64 = r.headers()["x-relume-tick"].to_str().unwrap().parse().unwrap();
+    assert!(tick >= 3);
+    // A tick far in the future times out (bounded wait), with a JSON error.
+    let short =
+        TestServer::start(None, Limits { frame_wait: std::time::Duration::from_millis(200), ..Limits::default() })
+            .await;
+    let id2 = short.session(small("cornell-box")).await;
+    let r = short.http.get(short.url(&format!("/v1/sessions/{id2}/frame.png?tick=1000"))).send().await.unwrap();
+    assert_eq!(r.status(), 408);
+    let v: Value = r.json().await.unwrap();
+    assert_eq!(v["error"], "timeout");
+    s.shutdown().await.unwrap();
+    short.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bearer_token_guards_v1_routes() {
+    let s = TestServer::start(Some("sesame"), Limits::default()).await;
+    assert_eq!(s.http.get(s.url("/healthz")).send().await.unwrap().status(), 200);
+    let r = s.http.get(s.url("/v1/scenes")).send().await.unwrap();
+    assert_eq!(r.status(), 401);
+    let v: Value = r.json().await.unwrap();
+    assert_eq!(v["error"], "unauthorized");
+    assert_eq!(s.http.get(s.url("/v1/scenes")).bearer_auth("wrong").send().await.unwrap().status(), 401);
+    assert_eq!(s.http.get(s.url("/v1/scenes")).bearer_auth("sesame").send().await.unwrap().status(), 200);
+    assert_eq!(s.http.get(s.url("/v1/scenes?token=sesame")).send().await.unwrap().status(), 200);
+    s.shutdown().await.unwrap();
+}
+
+/// (method, path, body, expected status, words the detail must contain)
+type BadCase = (&'static str, String, Option<String>, u16, &'static str);
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_inputs_get_their_4xx_and_harm_nothing() {
+    let limits = Limits { max_sessions: 3, max_body_bytes: 64 * 1024, max_edits_per_message: 10, ..Limits::default() };
+    let s = TestServer::start(None, limits).await;
+    let bystander = s.session(small("cornell-box")).await;
+    let victim = s.session(small("bunnies-1")).await;
+    let v = |p: &str| format!("/v1/sessions/{victim}{p}");
+    let huge = format!("{{\"edits\": [{}]}}", vec![r#"{"target":"camera","vfov_deg":40}"#; 3000].join(","));
+    let many = format!("{{\"edits\": [{}]}}", [r#"{"target":"camera","vfov_deg":40}"#; 11].join(","));
+    let cases: Vec<BadCase> = vec![
+        ("POST", "/v1/sessions".into(), Some("{".into()), 400, "EOF"),
+        ("POST", "/v1/sessions".into(), Some("not json".into()), 400, "expected"),
+        ("POST", "/v1/sessions".into(), Some("[]".into()), 422, "expected struct CreateSession"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": 5}"#.into()), 422, "scene"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "colour": 1}"#.into()), 422, "unknown field"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "../../etc/passwd"}"#.into()), 422, "not a scene name"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "no-such-scene"}"#.into()), 404, "no bundled scene"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "width": 100000}"#.into()), 413, "exceeds"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "width": 0}"#.into()), 422, "at least 1"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "width": -3}"#.into()), 422, "width"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "width": "wide"}"#.into()), 422, "invalid type"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "technique": {"id": "magic"}}"#.into()), 422, "unknown variant"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "technique": {"id": "path", "spp": 1000000}}"#.into()), 413, "spp"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "technique": {"id": "path", "packet_width": 7}}"#.into()), 422, "packet_width"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "tick_hz": 100000}"#.into()), 422, "tick_hz"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": {"camera": {}}}"#.into()), 422, "scene.camera"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": {"camera": {"position":[0,0,1],"look_at":[0,0,0],"vfov_deg":40,"resolution":[8,8]}, "materials": {"m": {"type":"diffuse","reflectance":[0.5,0.5,0.5]}}, "objects": [{"name":"o","shape":{"type":"mesh","path":"../../../etc/passwd"},"material":"m"}]}}"#.into()), 422, "escapes the scenes root"),
+        ("POST", "/v1/sessions".into(), Some(r#"{"scene": {"camera": {"position":[0,0,1],"look_at":[0,0,0],"vfov_deg":40,"resolution":[8,8]}, "materials": {"m": {"type":"diffuse","reflectance":[0.5,0.5,0.5]}}, "objects": [{"name":"o","shape":{"type":"quad"},"material":"m","transform":{"translation":[1e39,0,0]}}]}}"#.into()), 422, "not a finite number"),
+        ("GET", "/v1/sessions/nope".into(), None, 404, "no session"),
+        ("DELETE", "/v1/sessions/nope".into(), None, 404, "no session"),
+        ("POST", "/v1/sessions/nope/tick".into(), None, 404, "no session"),
+        ("POST", "/v1/sessions/nope/edits".into(), Some(r#"{"edits": []}"#.into()), 404, "no session"),
+        ("POST", v("/edits"), Some(r#"{"edits": [{"target": "object", "name": "ghost", "transform": {}}]}"#.into()), 422, "unknown object"),
+        ("POST", v("/edits"), Some(r#"{"edits": [{"target": "object", "name": "floor", "transform": {}}]}"#.into()), 422, "static"),
+        ("POST", v("/edits"), Some(r#"{"edits": [{"target": "object", "name": "bunny-1", "transform": {"rotation": [0, 0, 0, 3]}}]}"#.into()), 422, "quaternion"),
+        ("POST", v("/edits"), Some(r#"{"edits": [{"target": "object", "name": "bunny-1", "transform": {"scale": [1, 0, 1]}}]}"#.into()), 422, "zero"),
+        ("POST", v("/edits"), Some(r#"{"edits": [{"target": "object", "name": "bunny-1", "transform": {"translation": [1e39, 0, 0]}}]}"#.into()), 422, "finite"),
+        ("POST", v("/edits"), Some(r#"{"edits": [{"target": "planet", "name": "x"}]}"#.into()), 422, "unknown variant"),
+        ("POST", v("/edits"), Some(r#"{"edits": [{"target": "camera", "vfov_deg": 400}]}"#.into()), 422, "vfov_deg"),
+        ("POST", v("/edits"), Some(r#"{"edits": [{"target": "material", "name": "bunny", "material": {"type": "diffuse", "reflectance": [2, 0, 0]}}]}"#.into()), 422, "energy"),
+        ("POST", v("/edits"), Some(r#"{"edits": [{"target": "light", "name": "ceiling-light", "emitter": {"type": "point", "intensity": [1, 1, 1]}}]}"#.into()), 422, "emitter type"),
+        ("POST", v("/edits"), Some(r#"{"edits": {"target": "camera"}}"#.into()), 422, "invalid type"),
+        ("POST", v("/edits"), Some(many), 413, "limit of 10"),
+        ("POST", v("/edits"), Some(huge), 413, "request body"),
+        ("GET", v("/frame.gif"), None, 404, "frame.png"),
+        ("GET", v("/frame.png?tick=abc"), None, 422, "query"),
+        ("GET", v("/frame.png?exposure=1e39"), None, 422, "exposure"),
+        ("GET", v("/stats?n=0"), None, 422, "n:"),
+        ("GET", v("/stats?n=99999"), None, 422, "n:"),
+        ("GET", "/v2/anything".into(), None, 404, "no such route"),
+    ];
+    assert!(cases.len() >= 30);
+    for (method, path, body, status, words) in &cases {
+        let mut req = match *method {
+            "GET" => s.http.get(s.url(path)),
+            "POST" => s.http.post(s.url(path)),
+            _ => s.http.delete(s.url(path)),
+        };
+        if let Some(b) = body {
+            req = req.header("content-type", "application/json").body(b.clone());
+        }
+        let r = req.send().await.unwrap();
+        let got = r.status().as_u16();
+        let text = r.text().await.unwrap();
+        assert_eq!(got, *status, "{method} {path} {body:?}: {text}");
+        let v: Value = serde_json::from_str(&text).unwrap_or_else(|_| panic!("{method} {path}: not JSON: {text}"));
+        assert!(v["error"].is_string(), "{text}");
+        let detail = v["detail"].as_str().unwrap();
+        assert!(detail.contains(words), "{method} {path}: detail '{detail}' lacks '{words}'");
+    }
+    // Too many sessions: the limit is 3 and two exist.
+    s.session(small("cornell-box")).await;
+    let r = s.http.post(s.url("/v1/sessions")).json(&small("cornell-box")).send().await.unwrap();
+    assert_eq!(r.status(), 429);
+    // The server is healthy, and both sessions still tick and answer.
+    assert_eq!(s.http.get(s.url("/healthz")).send().await.unwrap().status(), 200);
+    for id in [&bystander, &victim] {
+        let r = s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
+        assert_eq!(r.status(), 200, "session {id} harmed");
+    }
+    // Nothing from the rejected batches was queued: the victim's tick applied no edits.
+    let hist: Value = s.http.get(s.url(&v("/stats"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(hist["stats"][0]["edits_received"], 0);
+    let m = s.http.get(s.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    assert!(m.contains("relume_rejected_requests_total{reason=\"invalid\"}"));
+    s.shutdown().await.unwrap();
+}
