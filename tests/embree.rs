@@ -87,7 +87,7 @@ fn moving_an_instance_then_recommitting_changes_what_is_hit() {
     );
     top.set_instance_transform(id, moved).unwrap();
     let top = top.commit().unwrap();
-    assert!(top.intersect1(&probe).map_or(true, |h| (h.t - 5.0).abs() > 0.5), "old position still hit");
+    assert!(top.intersect1(&probe).is_none_or(|h| (h.t - 5.0).abs() > 0.5), "old position still hit");
     // The square now lies in the y=0 plane, spanning z in [1, 3].
     let side = Ray::new(Vec3::new(0.2, 4.0, 2.5), Vec3::NEG_Y);
     let hit = top.intersect1(&side).expect("moved square must be hit from above");

@@ -15,6 +15,20 @@ pub struct TestServer {
 
 impl TestServer {
     pub async fn start(token: Option<&str>, limits: Limits) -> TestServer {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        TestServer::start_on(listener, token, limits).await
+    }
+
+    /// A server whose accepted sockets have small send buffers (they inherit the listener's),
+    /// so a client that stops reading makes the server block on sending.
+    pub async fn start_with_small_send_buffers(limits: Limits) -> TestServer {
+        let socket = tokio::net::TcpSocket::new_v4().unwrap();
+        socket.set_send_buffer_size(4096).unwrap();
+        socket.bind("127.0.0.1:0".parse().unwrap()).unwrap();
+        TestServer::start_on(socket.listen(64).unwrap(), None, limits).await
+    }
+
+    pub async fn start_on(listener: tokio::net::TcpListener, token: Option<&str>, limits: Limits) -> TestServer {
         let config = ServerConfig {
             scenes_root: Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").canonicalize().unwrap(),
             token: token.map(str::to_string),
@@ -22,7 +36,6 @@ impl TestServer {
             limits,
         };
         let state = Arc::new(AppState::new(config).expect("server state"));
-        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
         let addr = listener.local_addr().unwrap();
         let (stop, stopped) = oneshot::channel::<()>();
         let done = tokio::spawn(server::run(listener, state.clone(), async move {

@@ -1,0 +1,194 @@
+//! The WebSocket protocol with a real client (tokio-tungstenite) against a real server.
+mod common;
+use common::server::TestServer;
+use futures_util::{SinkExt, StreamExt};
+use relume::server::protocol::{FrameFormat, FrameHeader, FRAME_HEADER_LEN};
+use relume::server::Limits;
+use serde_json::{json, Value};
+use std::time::Duration;
+use tokio_tungstenite::tungstenite::Message;
+
+type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+async fn connect(s: &TestServer, id: &str) -> Socket {
+    let (ws, _) =
+        tokio_tungstenite::connect_async(s.ws_url(&format!("/v1/sessions/{id}/ws"))).await.expect("websocket connects");
+    ws
+}
+
+async fn send(ws: &mut Socket, v: Value) {
+    ws.send(Message::Text(v.to_string().into())).await.unwrap();
+}
+
+/// The next message, skipping pings; panics after 20 s.
+async fn next(ws: &mut Socket) -> Message {
+    loop {
+        let m = tokio::time::timeout(Duration::from_secs(20), ws.next())
+            .await
+            .expect("message in time")
+            .expect("open")
+            .expect("ok");
+        if !matches!(m, Message::Ping(_) | Message::Pong(_)) {
+            return m;
+        }
+    }
+}
+
+async fn next_text(ws: &mut Socket) -> Value {
+    match next(ws).await {
+        Message::Text(t) => serde_json::from_str(&t).unwrap(),
+        other => panic!("expected text, got {other:?}"),
+    }
+}
+
+async fn next_frame(ws: &mut Socket) -> (FrameHeader, image::DynamicImage) {
+    loop {
+        if let Message::Binary(b) = next(ws).await {
+            let h = FrameHeader::decode(&b).expect("frame header");
+            return (h, image::load_from_memory(&b[FRAME_HEADER_LEN..]).expect("png decodes"));
+        }
+    }
+}
+
+fn bunny_at(x: f32) -> Value {
+    json!({"target": "object", "name": "bunny-1", "transform": {"translation": [x, 0, 280], "scale": [140, 140, 140]}})
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn edits_tick_frame_and_the_frame_changes_after_a_move() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s
+        .session(json!({"scene": "bunnies-1", "width": 48, "height": 48, "technique": {"id": "path", "spp": 4}}))
+        .await;
+    let mut ws = connect(&s, &id).await;
+    send(&mut ws, json!({"type": "subscribe", "frames": "png", "stats": true, "every": 1})).await;
+    send(&mut ws, json!({"type": "edits", "edits": [bunny_at(150.0)]})).await;
+    let ack = next_text(&mut ws).await;
+    assert_eq!(ack, json!({"type": "edits_accepted", "queued": 1, "pending": 1}));
+    send(&mut ws, json!({"type": "tick"})).await;
+    let stats = next_text(&mut ws).await;
+    assert_eq!(stats["type"], "stats");
+    assert_eq!(stats["stats"]["moved_surfaces"], 1);
+    let (h1, img1) = next_frame(&mut ws).await;
+    assert_eq!((h1.tick, h1.format, h1.width, h1.height), (0, FrameFormat::Png, 48, 48));
+
+    send(&mut ws, json!({"type": "edits", "edits": [bunny_at(400.0)]})).await;
+    next_text(&mut ws).await;
+    send(&mut ws, json!({"type": "tick"})).await;
+    let (h2, img2) = next_frame(&mut ws).await;
+    assert_eq!(h2.tick, 1);
+    assert_ne!(h2.accumulation_id, h1.accumulation_id);
+    assert_ne!(img1.to_rgb8().into_raw(), img2.to_rgb8().into_raw(), "moving the bunny must change the frame");
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_messages_get_errors_and_the_socket_stays_open() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(json!({"scene": "bunnies-1", "width": 16, "height": 16})).await;
+    let mut ws = connect(&s, &id).await;
+    send(&mut ws, json!({"type": "subscribe", "frames": "none", "stats": true})).await;
+    for (bad, words) in [
+        (json!({"type": "dance"}), "unknown variant"),
+        (json!({"type": "edits", "edits": [{"target": "object", "name": "floor", "transform": {}}]}), "static"),
+        (json!({"type": "subscribe", "every": 0}), "every"),
+        (json!({"type": "play", "anim": "../../etc/passwd"}), "not an animation name"),
+        (json!({"type": "play", "anim": "walker"}), "unknown object"),
+        (json!({"type": "play", "anim": "bunnies-1", "speed": -1}), "speed"),
+    ] {
+        send(&mut ws, bad.clone()).await;
+        let e = next_text(&mut ws).await;
+        assert_eq!(e["type"], "error", "{bad}: {e}");
+        assert!(e["detail"].as_str().unwrap().contains(words), "{bad}: {e}");
+    }
+    ws.send(Message::Text("{not json".into())).await.unwrap();
+    assert_eq!(next_text(&mut ws).await["error"], "malformed_json");
+    // Still open and working.
+    send(&mut ws, json!({"type": "tick"})).await;
+    assert_eq!(next_text(&mut ws).await["type"], "stats");
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn play_drives_the_animation_and_pause_stops_it() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(json!({"scene": "bunnies-2", "width": 16, "height": 16})).await;
+    let mut ws = connect(&s, &id).await;
+    send(&mut ws, json!({"type": "subscribe", "frames": "none", "stats": true})).await;
+    send(&mut ws, json!({"type": "play", "anim": "bunnies-2", "speed": 2.0})).await;
+    // Ticks arrive without the client asking, each moving both bunnies.
+    for _ in 0..3 {
+        let st = next_text(&mut ws).await;
+        assert_eq!(st["type"], "stats");
+        assert_eq!(st["stats"]["moved_surfaces"], 2);
+    }
+    send(&mut ws, json!({"type": "pause"})).await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let before: Value = s.http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    tokio::time::sleep(Duration::from_millis(400)).await;
+    let after: Value = s.http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(before["ticks"], after["ticks"], "ticks continued after pause");
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_slow_consumer_gets_the_newest_frame_and_counts_the_rest() {
+    // Small socket buffers and 64×64 EXR frames (tens of kB of noise each): a client that stops
+    // reading blocks the server's send, while the session keeps ticking at 100 Hz.
+    let s = TestServer::start_with_small_send_buffers(Limits::default()).await;
+    let id = s.session(json!({"scene": "cornell-box", "width": 64, "height": 64, "tick_hz": 100})).await;
+    let (tcp, _) = {
+        let socket = tokio::net::TcpSocket::new_v4().unwrap();
+        socket.set_recv_buffer_size(4096).unwrap();
+        (socket.connect(s.addr).await.unwrap(), ())
+    };
+    let stream = tokio_tungstenite::MaybeTlsStream::Plain(tcp);
+    let (mut ws, _) =
+        tokio_tungstenite::client_async(s.ws_url(&format!("/v1/sessions/{id}/ws")), stream).await.unwrap();
+    send(&mut ws, json!({"type": "subscribe", "frames": "exr", "stats": true})).await;
+    tokio::time::sleep(Duration::from_millis(800)).await;
+    let mut last_dropped = 0;
+    let mut ticks = Vec::new();
+    while ticks.len() < 6 {
+        match next(&mut ws).await {
+            Message::Text(t) => {
+                let st: Value = serde_json::from_str(&t).unwrap();
+                ticks.push(st["stats"]["tick"].as_u64().unwrap());
+                last_dropped = st["frames_dropped"].as_u64().unwrap();
+            }
+            Message::Binary(b) => assert_eq!(FrameHeader::decode(&b).unwrap().format, FrameFormat::Exr),
+            other => panic!("unexpected {other:?}"),
+        }
+    }
+    assert!(ticks.windows(2).all(|w| w[1] > w[0]), "ticks out of order: {ticks:?}");
+    assert!(last_dropped > 0, "a slow consumer must see frames dropped (ticks {ticks:?})");
+    assert!(ticks.windows(2).any(|w| w[1] > w[0] + 1), "no tick was skipped: {ticks:?}");
+    let m = s.http.get(s.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    assert!(!m.contains("relume_frames_dropped_total 0\n"), "{m}");
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn graceful_shutdown_completes_with_sessions_and_sockets_open() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let a = s.session(json!({"scene": "cornell-box", "width": 16, "height": 16, "tick_hz": 30})).await;
+    let b = s.session(json!({"scene": "bunnies-4", "width": 16, "height": 16})).await;
+    let mut ws = connect(&s, &a).await;
+    send(&mut ws, json!({"type": "subscribe", "frames": "none", "stats": true})).await;
+    next_text(&mut ws).await;
+    let _ws_b = connect(&s, &b).await;
+    let state = s.state.clone();
+    tokio::time::timeout(Duration::from_secs(20), s.shutdown()).await.expect("shutdown in time").unwrap();
+    assert_eq!(state.session_count(), 0, "sessions were not drained");
+    // The socket was closed by the server.
+    let end = tokio::time::timeout(Duration::from_secs(5), async {
+        loop {
+            match ws.next().await {
+                None | Some(Err(_)) | Some(Ok(Message::Close(_))) => break,
+                Some(Ok(_)) => continue,
+            }
+        }
+    })
+    .await;
+    assert!(end.is_ok(), "socket still open after shutdown");
+}
