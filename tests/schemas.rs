@@ -50,6 +50,27 @@ fn bundled_scenes_and_animations_match_their_schemas() {
 }
 
 #[test]
+fn websocket_examples_match_the_ws_schema() {
+    let ws = validator("ws.schema.json");
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("proto/examples");
+    let mut n = 0;
+    for entry in std::fs::read_dir(&dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.file_name().unwrap().to_string_lossy().starts_with("ws-") {
+            let errs = errors(&ws, &read(&path));
+            assert!(errs.is_empty(), "{}: {errs:?}", path.display());
+            n += 1;
+        }
+    }
+    assert_eq!(n, 8);
+    // Edits inside the HTTP example follow the same edit schema.
+    let edits = read(&dir.join("edits.request.json"));
+    let msg = serde_json::json!({"type": "edits", "edits": edits["edits"]});
+    assert!(errors(&ws, &msg).is_empty(), "{:?}", errors(&ws, &msg));
+    assert!(!errors(&ws, &serde_json::json!({"type": "subscribe", "every": 0})).is_empty());
+}
+
+#[test]
 fn schema_examples_validate_and_load() {
     let scene_schema = validator("scene.schema.json");
     for example in proto("scene.schema.json")["examples"].as_array().unwrap() {

@@ -1,9 +1,9 @@
 //! API errors: every failure answers JSON `{error, detail}` with a 4xx for client faults and a
 //! 500 (plus a log line) for internal ones. Nothing panics or exits on bad input.
+use super::protocol::ErrorBody;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
-use serde::Serialize;
 
 /// An error answer. `error` is a stable machine-readable code; `detail` is for people.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -11,12 +11,6 @@ pub struct ApiError {
     pub status: StatusCode,
     pub error: &'static str,
     pub detail: String,
-}
-
-#[derive(Serialize)]
-struct Body<'a> {
-    error: &'a str,
-    detail: &'a str,
 }
 
 impl ApiError {
@@ -49,7 +43,7 @@ impl ApiError {
 
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
-        (self.status, Json(Body { error: self.error, detail: &self.detail })).into_response()
+        (self.status, Json(ErrorBody { error: self.error.to_string(), detail: self.detail })).into_response()
     }
 }
 

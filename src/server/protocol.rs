@@ -6,6 +6,14 @@ use crate::scene::edits::Edit;
 use crate::technique::TechniqueConfig;
 use serde::{Deserialize, Serialize};
 
+/// Every error answer over HTTP: a stable code and a message naming what was wrong.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ErrorBody {
+    pub error: String,
+    pub detail: String,
+}
+
 /// `POST /v1/sessions`. `scene` is a bundled scene's name or an inline scene document.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
