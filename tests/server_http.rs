@@ -27,6 +27,11 @@ async fn every_route_answers() {
     assert_eq!(v["ticks"], 0);
     assert_eq!(v["technique"]["id"], "path");
 
+    // The scene document lists what can move.
+    let scene: Value = http.get(s.url(&format!("/v1/sessions/{id}/scene"))).send().await.unwrap().json().await.unwrap();
+    let bunny = scene["objects"].as_array().unwrap().iter().find(|o| o["name"] == "bunny-1").unwrap();
+    assert_eq!(bunny["dynamic"], true);
+
     // No frame before the first tick.
     assert_eq!(http.get(s.url(&format!("/v1/sessions/{id}/frame.png"))).send().await.unwrap().status(), 404);
 

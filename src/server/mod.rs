@@ -92,6 +92,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/scenes", get(routes::list_scenes))
         .route("/sessions", post(routes::create_session))
         .route("/sessions/{id}", get(routes::get_session).delete(routes::delete_session))
+        .route("/sessions/{id}/scene", get(routes::get_scene))
         .route("/sessions/{id}/edits", post(routes::post_edits))
         .route("/sessions/{id}/tick", post(routes::post_tick))
         .route("/sessions/{id}/stats", get(routes::get_stats))
@@ -99,6 +100,9 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/sessions/{id}/{file}", get(routes::get_frame))
         .layer(middleware::from_fn_with_state(state.clone(), require_token));
     Router::new()
+        .route("/", get(routes::viewer_page))
+        .route("/viewer.js", get(routes::viewer_script))
+        .route("/viewer.css", get(routes::viewer_style))
         .route("/healthz", get(routes::healthz))
         .route("/metrics", get(routes::metrics))
         .nest("/v1", v1)

@@ -89,6 +89,14 @@ pub async fn delete_session(State(s): State<Shared>, Path(id): Path<String>) -> 
     Ok(StatusCode::NO_CONTENT)
 }
 
+pub async fn get_scene(
+    State(s): State<Shared>,
+    Path(id): Path<String>,
+) -> Result<Json<crate::scene::SceneDesc>, ApiError> {
+    let entry = s.session(&id)?;
+    Ok(Json(entry.handle.scene().await?))
+}
+
 pub async fn post_edits(
     State(s): State<Shared>,
     Path(id): Path<String>,
@@ -208,6 +216,19 @@ pub async fn get_stats(
     let history = entry.handle.history.lock().map_err(|_| ApiError::internal("stats lock poisoned"))?;
     let skip = history.len().saturating_sub(n);
     Ok(Json(StatsHistory { stats: history.iter().skip(skip).cloned().collect() }))
+}
+
+/// The viewer: plain HTML, CSS and JS embedded in the binary (no build step).
+pub async fn viewer_page() -> Response {
+    ([(header::CONTENT_TYPE, "text/html; charset=utf-8")], include_str!("viewer/index.html")).into_response()
+}
+
+pub async fn viewer_script() -> Response {
+    ([(header::CONTENT_TYPE, "text/javascript; charset=utf-8")], include_str!("viewer/viewer.js")).into_response()
+}
+
+pub async fn viewer_style() -> Response {
+    ([(header::CONTENT_TYPE, "text/css; charset=utf-8")], include_str!("viewer/viewer.css")).into_response()
 }
 
 pub async fn not_found() -> ApiError {

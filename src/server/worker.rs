@@ -38,10 +38,23 @@ pub struct PublishedFrame {
 }
 
 pub enum Command {
-    Edits { batch: Vec<Edit>, reply: oneshot::Sender<Result<EditsAccepted, ApiError>> },
-    Tick { reply: oneshot::Sender<Result<TickStats, ApiError>> },
-    Play { anim: Box<Animation>, speed: f32, reply: oneshot::Sender<Result<(), ApiError>> },
+    Edits {
+        batch: Vec<Edit>,
+        reply: oneshot::Sender<Result<EditsAccepted, ApiError>>,
+    },
+    Tick {
+        reply: oneshot::Sender<Result<TickStats, ApiError>>,
+    },
+    Play {
+        anim: Box<Animation>,
+        speed: f32,
+        reply: oneshot::Sender<Result<(), ApiError>>,
+    },
     Pause,
+    /// The current scene description (edits applied).
+    Scene {
+        reply: oneshot::Sender<crate::scene::SceneDesc>,
+    },
     Shutdown,
 }
 
@@ -183,6 +196,12 @@ impl SessionHandle {
         answer.await.map_err(|_| gone())?
     }
 
+    pub async fn scene(&self) -> Result<crate::scene::SceneDesc, ApiError> {
+        let (reply, answer) = oneshot::channel();
+        self.send(Command::Scene { reply })?;
+        answer.await.map_err(|_| gone())
+    }
+
     pub fn pause(&self) -> Result<(), ApiError> {
         self.send(Command::Pause)
     }
@@ -233,6 +252,9 @@ fn run(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
                 if tick_hz.is_none() {
                     next_tick = None;
                 }
+            }
+            Some(Command::Scene { reply }) => {
+                let _ = reply.send(w.session.scene().desc().clone());
             }
             Some(Command::Shutdown) => break,
             None => {

@@ -1,0 +1,130 @@
+//! The viewer page in headless Chromium (Debian `chromium` + `chromium-driver`, installed by
+//! scripts/test.sh): load the page, start a session, drag an object on the image, and check that
+//! a new frame arrived and differs.
+mod common;
+use common::server::TestServer;
+use fantoccini::actions::{InputSource, MouseActions, PointerAction, MOUSE_BUTTON_LEFT};
+use fantoccini::{ClientBuilder, Locator};
+use relume::server::Limits;
+use serde_json::{json, Value};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const CHROMIUM: &str = "/usr/bin/chromium";
+const CHROMEDRIVER: &str = "/usr/bin/chromedriver";
+
+struct Driver(Child);
+
+impl Drop for Driver {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+async fn start_driver() -> (Driver, u16) {
+    assert!(
+        std::path::Path::new(CHROMIUM).exists() && std::path::Path::new(CHROMEDRIVER).exists(),
+        "headless Chromium is missing: run scripts/test.sh, which installs chromium and chromium-driver"
+    );
+    let port = free_port();
+    let child = Command::new(CHROMEDRIVER)
+        .arg(format!("--port={port}"))
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("chromedriver starts");
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while tokio::net::TcpStream::connect(("127.0.0.1", port)).await.is_err() {
+        assert!(Instant::now() < deadline, "chromedriver did not listen");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    (Driver(child), port)
+}
+
+/// Polls a JS expression until `done` holds; returns its last value.
+async fn wait_for(c: &fantoccini::Client, script: &str, done: impl Fn(&Value) -> bool, what: &str) -> Value {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    loop {
+        let v = c.execute(script, vec![]).await.unwrap();
+        if done(&v) {
+            return v;
+        }
+        assert!(Instant::now() < deadline, "timed out waiting for {what} (last: {v})");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_viewer_starts_a_session_and_a_drag_changes_the_frame() {
+    let server = TestServer::start(None, Limits::default()).await;
+    let (_driver, port) = start_driver().await;
+    let caps = json!({
+        "goog:chromeOptions": {
+            "binary": CHROMIUM,
+            "args": ["--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--disable-quic",
+                     "--no-first-run", "--disable-background-networking", "--disable-component-update", "--disable-sync",
+                     "--window-size=1280,900"]
+        }
+    });
+    let connector = hyper_util::client::legacy::connect::HttpConnector::new();
+    let c = ClientBuilder::new(connector)
+        .capabilities(caps.as_object().unwrap().clone())
+        .connect(&format!("http://127.0.0.1:{port}"))
+        .await
+        .expect("WebDriver session");
+
+    c.goto(&server.url("/")).await.unwrap();
+    assert_eq!(c.title().await.unwrap(), "relume viewer");
+    // Pick a small scene with a movable object, and start.
+    wait_for(
+        &c,
+        "return document.querySelectorAll('#scene option').length",
+        |v| v.as_u64() > Some(3),
+        "the scene list",
+    )
+    .await;
+    c.execute(
+        "document.getElementById('scene').value = 'bunnies-1'; document.getElementById('size').value = '128';",
+        vec![],
+    )
+    .await
+    .unwrap();
+    c.find(Locator::Id("start")).await.unwrap().click().await.unwrap();
+    wait_for(&c, "return window.relume.frames", |v| v.as_u64() >= Some(2), "the first frames").await;
+    let before = c
+        .execute("return [window.relume.fingerprint, window.relume.accumulation, window.relume.frames]", vec![])
+        .await
+        .unwrap();
+    let target = c.execute("return document.getElementById('target').value", vec![]).await.unwrap();
+    assert_eq!(target, "object/bunny-1");
+
+    // Drag across the image with real pointer input.
+    let img = c.find(Locator::Id("frame")).await.unwrap();
+    let drag = MouseActions::new("mouse".into())
+        .then(PointerAction::MoveToElement { element: img, duration: None, x: 0, y: 0 })
+        .then(PointerAction::Down { button: MOUSE_BUTTON_LEFT })
+        .then(PointerAction::MoveBy { duration: Some(Duration::from_millis(200)), x: 80, y: -40 })
+        .then(PointerAction::MoveBy { duration: Some(Duration::from_millis(200)), x: 60, y: 0 })
+        .then(PointerAction::Up { button: MOUSE_BUTTON_LEFT });
+    c.perform_actions(drag).await.unwrap();
+
+    // A new accumulation (the object moved) and a different frame arrive.
+    let acc0 = before[1].as_u64().unwrap();
+    wait_for(&c, "return window.relume.accumulation", |v| v.as_u64() > Some(acc0), "a frame after the drag").await;
+    let after = c.execute("return [window.relume.fingerprint, window.relume.edits || 0]", vec![]).await.unwrap();
+    assert!(after[1].as_u64() > Some(0), "the drag sent no edits");
+    assert_ne!(after[0], before[0], "the frame did not change after the drag");
+    // The stats panel shows the tick's numbers.
+    let stats_rows = c.execute("return document.querySelectorAll('#stats tr').length", vec![]).await.unwrap();
+    assert!(stats_rows.as_u64() >= Some(5));
+    // Keep a screenshot for people to look at (target/ is never committed).
+    let shot = c.screenshot().await.unwrap();
+    std::fs::write(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/viewer-test.png"), shot).unwrap();
+    c.close().await.unwrap();
+    server.shutdown().await.unwrap();
+}
