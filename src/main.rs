@@ -4,10 +4,11 @@
 //! - `relume render SCENE.json --technique path --spp N --out FILE.(png|jpg|exr)`
 //! - `relume render SCENE.json --anim NAME.anim.json --frames N --out DIR/`
 //! - `relume bench rays SCENE.json [--json FILE]`
+//! - `relume load --url URL --scene NAME --anim NAME.anim.json --sessions N --hz H --duration 60s`
 //!
 //! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
 use clap::{Parser, Subcommand};
-use relume::tools::{bench, render, serve};
+use relume::tools::{bench, load, render, serve};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -27,6 +28,8 @@ enum Command {
     Serve(serve::ServeArgs),
     /// Render a still image or an animation through the engine's tick pipeline.
     Render(render::RenderArgs),
+    /// Load-test a running server with scripted animations over WebSocket.
+    Load(load::LoadArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -49,6 +52,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Serve(args) => serve::run(args),
         Command::Render(args) => render::run(args),
+        Command::Load(args) => load::run(args),
         Command::Bench { which: BenchCommand::Rays(args) } => bench::rays(args),
     };
     match result {

@@ -1,0 +1,346 @@
+//! `relume load`: a scripted-animation load client for a running server.
+//!
+//! It opens N sessions, each over its own WebSocket, and streams the animation's edits at H Hz
+//! for the given duration. Each period sends the edits for the animation's current time and, if
+//! the session has no tick in flight, a `tick`; edits sent while a tick is busy coalesce on the
+//! server (and are counted as such). At the end every session ticks once more, so every edit sent
+//! is either applied or reported coalesced: `lost_edits` must be 0.
+//!
+//! Latency is measured from sending a period's edits and tick to receiving that tick's frame.
+use super::UsageError;
+use crate::scene::animation::Animation;
+use crate::server::protocol::{ClientMessage, FrameFormat, FrameHeader, ServerMessage};
+use crate::technique::TechniqueConfig;
+use anyhow::{Context, Result};
+use futures_util::{SinkExt, StreamExt};
+use serde::Serialize;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+use tokio_tungstenite::tungstenite::Message;
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct LoadArgs {
+    /// Server base URL.
+    #[arg(long, default_value = "http://127.0.0.1:8080")]
+    pub url: String,
+    /// Bundled scene name on the server.
+    #[arg(long)]
+    pub scene: String,
+    /// Animation file whose edits are streamed (NAME.anim.json).
+    #[arg(long)]
+    pub anim: PathBuf,
+    #[arg(long, default_value_t = 1)]
+    pub sessions: usize,
+    /// Edit messages per second per session.
+    #[arg(long, default_value_t = 30.0)]
+    pub hz: f64,
+    /// How long to stream, e.g. 60s, 500ms, 2m.
+    #[arg(long, default_value = "60s", value_parser = humantime::parse_duration)]
+    pub duration: Duration,
+    /// Technique: an id (`path`) or a JSON TechniqueConfig.
+    #[arg(long, default_value = "path")]
+    pub technique: String,
+    #[arg(long)]
+    pub width: Option<u32>,
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Frame encoding to receive: png, jpg, exr or none.
+    #[arg(long, default_value = "png")]
+    pub frames: String,
+    #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Also write the report as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+/// What one session saw.
+#[derive(Debug, Default, Clone, Serialize)]
+pub struct SessionReport {
+    pub ticks: u64,
+    pub latencies_ms: Vec<f64>,
+    pub frames_received: u64,
+    pub frames_dropped: u64,
+    pub edits_sent: u64,
+    pub edits_received_by_server: u64,
+    pub edits_coalesced: u64,
+    pub bytes: u64,
+    pub errors: Vec<String>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct LoadReport {
+    pub scene: String,
+    pub sessions: usize,
+    pub hz: f64,
+    pub duration_s: f64,
+    pub ticks_per_second: f64,
+    pub latency_p50_ms: f64,
+    pub latency_p95_ms: f64,
+    pub latency_p99_ms: f64,
+    pub frames_received: u64,
+    pub frames_dropped: u64,
+    pub edits_sent: u64,
+    pub edits_applied: u64,
+    pub edits_coalesced: u64,
+    /// Edits sent that the server never drained into a tick (must be 0).
+    pub lost_edits: i64,
+    pub bytes_received: u64,
+    pub errors: u64,
+    pub error_samples: Vec<String>,
+    pub server_rss_start_bytes: u64,
+    pub server_rss_end_bytes: u64,
+}
+
+fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return 0.0;
+    }
+    let rank = ((p / 100.0) * (sorted.len() - 1) as f64).round() as usize;
+    sorted[rank.min(sorted.len() - 1)]
+}
+
+fn technique(spec: &str) -> Result<TechniqueConfig> {
+    if spec.trim_start().starts_with('{') {
+        serde_json::from_str(spec).map_err(|e| UsageError(format!("--technique: {e}")).into())
+    } else {
+        let json = format!("{{\"id\": {}}}", serde_json::Value::String(spec.to_string()));
+        serde_json::from_str(&json).map_err(|e| UsageError(format!("--technique '{spec}': {e}")).into())
+    }
+}
+
+async fn server_rss(http: &reqwest::Client, url: &str) -> u64 {
+    let Ok(resp) = http.get(format!("{url}/metrics")).send().await else { return 0 };
+    let text = resp.text().await.unwrap_or_default();
+    text.lines().find_map(|l| l.strip_prefix("relume_resident_memory_bytes ")).and_then(|v| v.trim().parse().ok()).unwrap_or(0)
+}
+
+/// Runs the load and returns the report (used by the CLI and by tests).
+pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
+    if args.sessions == 0 || !(args.hz > 0.0 && args.hz <= 1000.0) {
+        return Err(UsageError("--sessions must be at least 1 and --hz in (0, 1000]".into()).into());
+    }
+    let anim = Animation::load(&args.anim).map_err(|e| UsageError(format!("{}: {e}", args.anim.display())))?;
+    let config = technique(&args.technique)?;
+    let frames: FrameFormat = serde_json::from_value(serde_json::Value::String(args.frames.clone())).map_err(|_| UsageError("--frames: png, jpg, exr or none".into()))?;
+    let base = args.url.trim_end_matches('/').to_string();
+    let mut headers = reqwest::header::HeaderMap::new();
+    if let Some(t) = &args.token {
+        headers.insert(reqwest::header::AUTHORIZATION, format!("Bearer {t}").parse().context("token is not a valid header value")?);
+    }
+    let http = reqwest::Client::builder().default_headers(headers).build()?;
+    let rss_start = server_rss(&http, &base).await;
+
+    // Create the sessions first, so every stream starts together.
+    let mut ids = Vec::new();
+    for _ in 0..args.sessions {
+        let body = serde_json::json!({"scene": args.scene, "technique": config, "width": args.width, "height": args.height});
+        let resp = http.post(format!("{base}/v1/sessions")).json(&body).send().await.with_context(|| format!("connecting to {base}"))?;
+        let status = resp.status();
+        let v: serde_json::Value = resp.json().await.unwrap_or_default();
+        if !status.is_success() {
+            return Err(anyhow::anyhow!("creating a session: {status}: {}", v["detail"].as_str().unwrap_or("")));
+        }
+        ids.push(v["id"].as_str().unwrap_or_default().to_string());
+    }
+    let started = Instant::now();
+    let ws_base = base.replacen("http", "ws", 1);
+    let tasks: Vec<_> = ids
+        .iter()
+        .map(|id| {
+            let url = match &args.token {
+                Some(t) => format!("{ws_base}/v1/sessions/{id}/ws?token={t}"),
+                None => format!("{ws_base}/v1/sessions/{id}/ws"),
+            };
+            tokio::spawn(drive(url, anim.clone(), args.hz, args.duration, frames))
+        })
+        .collect();
+    let mut reports = Vec::new();
+    for t in tasks {
+        reports.push(t.await.unwrap_or_else(|e| SessionReport { errors: vec![format!("session task: {e}")], ..Default::default() }));
+    }
+    let elapsed = started.elapsed().as_secs_f64();
+    let rss_end = server_rss(&http, &base).await;
+    for id in &ids {
+        let _ = http.delete(format!("{base}/v1/sessions/{id}")).send().await;
+    }
+
+    let mut lat: Vec<f64> = reports.iter().flat_map(|r| r.latencies_ms.iter().copied()).collect();
+    lat.sort_by(f64::total_cmp);
+    let sum = |f: fn(&SessionReport) -> u64| reports.iter().map(f).sum::<u64>();
+    let (sent, received) = (sum(|r| r.edits_sent), sum(|r| r.edits_received_by_server));
+    let coalesced = sum(|r| r.edits_coalesced);
+    let errors: Vec<String> = reports.iter().flat_map(|r| r.errors.iter().cloned()).collect();
+    Ok(LoadReport {
+        scene: args.scene.clone(),
+        sessions: args.sessions,
+        hz: args.hz,
+        duration_s: elapsed,
+        ticks_per_second: sum(|r| r.ticks) as f64 / elapsed,
+        latency_p50_ms: percentile(&lat, 50.0),
+        latency_p95_ms: percentile(&lat, 95.0),
+        latency_p99_ms: percentile(&lat, 99.0),
+        frames_received: sum(|r| r.frames_received),
+        frames_dropped: sum(|r| r.frames_dropped),
+        edits_sent: sent,
+        edits_applied: received - coalesced,
+        edits_coalesced: coalesced,
+        lost_edits: sent as i64 - received as i64,
+        bytes_received: sum(|r| r.bytes),
+        errors: errors.len() as u64,
+        error_samples: errors.into_iter().take(5).collect(),
+        server_rss_start_bytes: rss_start,
+        server_rss_end_bytes: rss_end,
+    })
+}
+
+/// Where a session's stream is.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    /// Sending edits every period, a tick whenever none is in flight.
+    Streaming,
+    /// Time is up: waiting for the tick in flight, then one last tick drains queued edits.
+    Draining { drain_tick_sent: bool },
+}
+
+/// One session's stream.
+async fn drive(url: String, anim: Animation, hz: f64, duration: Duration, frames: FrameFormat) -> SessionReport {
+    let mut report = SessionReport::default();
+    let (mut ws, _) = match tokio_tungstenite::connect_async(&url).await {
+        Ok(c) => c,
+        Err(e) => {
+            report.errors.push(format!("websocket: {e}"));
+            return report;
+        }
+    };
+    let text = |m: &ClientMessage| Message::Text(serde_json::to_string(m).unwrap_or_default().into());
+    if ws.send(text(&ClientMessage::Subscribe { frames, stats: true, every: 1 })).await.is_err() {
+        report.errors.push("websocket closed before streaming".into());
+        return report;
+    }
+    let period = Duration::from_secs_f64(1.0 / hz);
+    let start = tokio::time::Instant::now();
+    let end = start + duration;
+    let mut next = start;
+    let mut in_flight: Option<Instant> = None;
+    let mut phase = Phase::Streaming;
+    loop {
+        tokio::select! {
+            _ = tokio::time::sleep_until(next), if phase == Phase::Streaming => {
+                if tokio::time::Instant::now() >= end {
+                    phase = Phase::Draining { drain_tick_sent: false };
+                } else {
+                    // Stream this period's edits; tick if the last one has finished.
+                    let edits = anim.edits_at(start.elapsed().as_secs_f32());
+                    report.edits_sent += edits.len() as u64;
+                    if ws.send(text(&ClientMessage::Edits { edits })).await.is_err() {
+                        report.errors.push("websocket closed while sending edits".into());
+                        break;
+                    }
+                    if in_flight.is_none() {
+                        if ws.send(text(&ClientMessage::Tick)).await.is_err() {
+                            report.errors.push("websocket closed while sending a tick".into());
+                            break;
+                        }
+                        in_flight = Some(Instant::now());
+                    }
+                    next += period;
+                    let now = tokio::time::Instant::now();
+                    if next < now {
+                        next = now + period;
+                    }
+                }
+            }
+            msg = ws.next() => {
+                let Some(Ok(msg)) = msg else {
+                    report.errors.push("websocket closed by the server".into());
+                    break;
+                };
+                let tick_done = match msg {
+                    Message::Text(t) => {
+                        report.bytes += t.len() as u64;
+                        match serde_json::from_str::<ServerMessage>(&t) {
+                            Ok(ServerMessage::Stats { stats, frames_dropped }) => {
+                                report.ticks += 1;
+                                report.frames_dropped = frames_dropped;
+                                report.edits_received_by_server += stats.edits_received as u64;
+                                report.edits_coalesced += stats.edits_coalesced as u64;
+                                frames == FrameFormat::None
+                            }
+                            Ok(ServerMessage::EditsAccepted { .. }) => false,
+                            Ok(ServerMessage::Error { error, detail }) => {
+                                report.errors.push(format!("{error}: {detail}"));
+                                false
+                            }
+                            Err(e) => {
+                                report.errors.push(format!("unreadable message: {e}"));
+                                false
+                            }
+                        }
+                    }
+                    Message::Binary(b) => {
+                        report.bytes += b.len() as u64;
+                        let frame = FrameHeader::decode(&b).is_some();
+                        report.frames_received += u64::from(frame);
+                        frame
+                    }
+                    _ => false,
+                };
+                if tick_done {
+                    if let Some(sent) = in_flight.take() {
+                        report.latencies_ms.push(sent.elapsed().as_secs_f64() * 1e3);
+                    }
+                }
+            }
+        }
+        // Draining: once nothing is in flight, send the last tick; once it is back, stop.
+        if let Phase::Draining { drain_tick_sent } = phase {
+            if in_flight.is_none() {
+                if drain_tick_sent {
+                    break;
+                }
+                if ws.send(text(&ClientMessage::Tick)).await.is_err() {
+                    report.errors.push("websocket closed while draining".into());
+                    break;
+                }
+                in_flight = Some(Instant::now());
+                phase = Phase::Draining { drain_tick_sent: true };
+            }
+        }
+    }
+    let _ = ws.close(None).await;
+    report
+}
+
+pub fn print_table(r: &LoadReport) {
+    println!("relume load: {} sessions of '{}' at {} Hz for {:.1} s", r.sessions, r.scene, r.hz, r.duration_s);
+    let rows: Vec<(&str, String)> = vec![
+        ("ticks per second (all sessions)", format!("{:.1}", r.ticks_per_second)),
+        ("tick latency p50 / p95 / p99 (ms)", format!("{:.1} / {:.1} / {:.1}", r.latency_p50_ms, r.latency_p95_ms, r.latency_p99_ms)),
+        ("frames received / dropped", format!("{} / {}", r.frames_received, r.frames_dropped)),
+        ("edits sent / applied / coalesced", format!("{} / {} / {}", r.edits_sent, r.edits_applied, r.edits_coalesced)),
+        ("edits lost", r.lost_edits.to_string()),
+        ("bytes received", r.bytes_received.to_string()),
+        ("errors", r.errors.to_string()),
+        ("server RSS start / end (MiB)", format!("{:.1} / {:.1}", r.server_rss_start_bytes as f64 / 1048576.0, r.server_rss_end_bytes as f64 / 1048576.0)),
+    ];
+    for (k, v) in rows {
+        println!("  {k:<36} {v}");
+    }
+    for e in &r.error_samples {
+        println!("  error: {e}");
+    }
+}
+
+pub fn run(args: LoadArgs) -> Result<()> {
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    let report = runtime.block_on(run_load(&args))?;
+    print_table(&report);
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+    }
+    if report.errors > 0 || report.lost_edits != 0 {
+        return Err(anyhow::anyhow!("{} errors, {} edits lost", report.errors, report.lost_edits));
+    }
+    Ok(())
+}

@@ -1,0 +1,38 @@
+//! A short load run against a real server: 2 sessions streaming an animation for 5 s complete
+//! with no errors and no lost edits. A correctness test: nothing here depends on speed.
+mod common;
+use common::server::TestServer;
+use relume::server::Limits;
+use relume::tools::load::{run_load, LoadArgs};
+use std::path::Path;
+use std::time::Duration;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_sessions_for_five_seconds_lose_nothing() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let args = LoadArgs {
+        url: s.url(""),
+        scene: "merry-go-round".into(),
+        anim: Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/merry-go-round.anim.json"),
+        sessions: 2,
+        hz: 30.0,
+        duration: Duration::from_secs(5),
+        technique: "path".into(),
+        width: Some(64),
+        height: Some(64),
+        frames: "png".into(),
+        token: None,
+        json: None,
+    };
+    let r = run_load(&args).await.expect("load run");
+    eprintln!("{r:?}");
+    assert_eq!(r.errors, 0, "{:?}", r.error_samples);
+    assert_eq!(r.lost_edits, 0);
+    assert!(r.edits_sent > 0 && r.edits_applied > 0);
+    assert_eq!(r.edits_sent, r.edits_applied + r.edits_coalesced);
+    assert!(r.frames_received > 2, "{} frames", r.frames_received);
+    assert!(r.latency_p50_ms > 0.0 && r.latency_p50_ms <= r.latency_p99_ms);
+    // The sessions were cleaned up afterwards.
+    assert_eq!(s.state.session_count(), 0);
+    s.shutdown().await.unwrap();
+}
