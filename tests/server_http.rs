@@ -80,6 +80,7 @@ async fn every_route_answers() {
     assert!(m.contains("relume_sessions 1"), "{m}");
     assert!(m.contains("relume_ticks_total 2"));
     assert!(m.contains("relume_tick_seconds_count 2"));
+    assert!(!m.contains("relume_encode_seconds_total 0\n"), "three frames were encoded: {m}");
     assert!(m.contains("relume_rejected_requests_total{reason=\"not_found\"} 1"));
 
     // Delete ends it.

@@ -22,6 +22,7 @@ pub struct Metrics {
     pub edits_coalesced: AtomicU64,
     tick_buckets: [AtomicU64; TICK_BUCKETS.len()],
     tick_count: AtomicU64,
+    encode_micros: AtomicU64,
     tick_sum_micros: AtomicU64,
     rejected: Mutex<BTreeMap<&'static str, u64>>,
 }
@@ -37,6 +38,11 @@ impl Metrics {
                 self.tick_buckets[i].fetch_add(1, Ordering::Relaxed);
             }
         }
+    }
+
+    /// Time spent encoding frames for clients (the service's main cost besides ticking).
+    pub fn observe_encode(&self, seconds: f64) {
+        self.encode_micros.fetch_add((seconds * 1e6) as u64, Ordering::Relaxed);
     }
 
     pub fn reject(&self, reason: &'static str) {
@@ -73,6 +79,11 @@ impl Metrics {
             "edits_coalesced_total",
             "Edits replaced by a later edit to the same target.",
             get(&self.edits_coalesced),
+        );
+        let _ = writeln!(
+            out,
+            "# HELP relume_encode_seconds_total Time spent encoding frames.\n# TYPE relume_encode_seconds_total counter\nrelume_encode_seconds_total {}",
+            get(&self.encode_micros) as f64 / 1e6
         );
         let _ = writeln!(
             out,

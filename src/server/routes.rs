@@ -181,10 +181,16 @@ pub async fn get_frame(
         }
     };
     let image = frame.clone();
-    let bytes = tokio::task::spawn_blocking(move || encode(&image.image, format, exposure))
-        .await
-        .map_err(|e| ApiError::internal(e.to_string()))?
-        .map_err(|e| ApiError::internal(e.to_string()))?;
+    let metrics = s.metrics.clone();
+    let bytes = tokio::task::spawn_blocking(move || {
+        let t = std::time::Instant::now();
+        let bytes = encode(&image.image, format, exposure);
+        metrics.observe_encode(t.elapsed().as_secs_f64());
+        bytes
+    })
+    .await
+    .map_err(|e| ApiError::internal(e.to_string()))?
+    .map_err(|e| ApiError::internal(e.to_string()))?;
     s.metrics.sent(bytes.len());
     let mut resp = Response::new(Body::from(bytes));
     let h = resp.headers_mut();

@@ -97,7 +97,14 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
                 };
                 let header = FrameHeader { tick: frame.tick, accumulation_id: frame.accumulation_id, format: sub.frames, width: frame.image.width, height: frame.image.height };
                 let image = frame.clone();
-                let Ok(Ok(bytes)) = tokio::task::spawn_blocking(move || encode(&image.image, format, 0.0)).await else { continue };
+                let metrics = state.metrics.clone();
+                let encoded = tokio::task::spawn_blocking(move || {
+                    let t = std::time::Instant::now();
+                    let bytes = encode(&image.image, format, 0.0);
+                    metrics.observe_encode(t.elapsed().as_secs_f64());
+                    bytes
+                });
+                let Ok(Ok(bytes)) = encoded.await else { continue };
                 let mut payload = Vec::with_capacity(bytes.len() + 32);
                 payload.extend_from_slice(&header.encode());
                 payload.extend_from_slice(&bytes);

@@ -90,6 +90,8 @@ pub struct LoadReport {
     pub error_samples: Vec<String>,
     pub server_rss_start_bytes: u64,
     pub server_rss_end_bytes: u64,
+    /// Server time spent encoding frames ÷ time spent ticking, during the run.
+    pub encode_to_tick_ratio: f64,
 }
 
 fn percentile(sorted: &[f64], p: f64) -> f64 {
@@ -109,10 +111,21 @@ fn technique(spec: &str) -> Result<TechniqueConfig> {
     }
 }
 
-async fn server_rss(http: &reqwest::Client, url: &str) -> u64 {
-    let Ok(resp) = http.get(format!("{url}/metrics")).send().await else { return 0 };
+/// The server's (resident bytes, seconds spent encoding frames, seconds spent ticking).
+async fn server_figures(http: &reqwest::Client, url: &str) -> (u64, f64, f64) {
+    let Ok(resp) = http.get(format!("{url}/metrics")).send().await else { return (0, 0.0, 0.0) };
     let text = resp.text().await.unwrap_or_default();
-    text.lines().find_map(|l| l.strip_prefix("relume_resident_memory_bytes ")).and_then(|v| v.trim().parse().ok()).unwrap_or(0)
+    let value = |name: &str| -> f64 {
+        text.lines()
+            .find_map(|l| l.strip_prefix(name).and_then(|v| v.strip_prefix(' ')))
+            .and_then(|v| v.trim().parse().ok())
+            .unwrap_or(0.0)
+    };
+    (
+        value("relume_resident_memory_bytes") as u64,
+        value("relume_encode_seconds_total"),
+        value("relume_tick_seconds_sum"),
+    )
 }
 
 /// Runs the load and returns the report (used by the CLI and by tests).
@@ -122,20 +135,30 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
     }
     let anim = Animation::load(&args.anim).map_err(|e| UsageError(format!("{}: {e}", args.anim.display())))?;
     let config = technique(&args.technique)?;
-    let frames: FrameFormat = serde_json::from_value(serde_json::Value::String(args.frames.clone())).map_err(|_| UsageError("--frames: png, jpg, exr or none".into()))?;
+    let frames: FrameFormat = serde_json::from_value(serde_json::Value::String(args.frames.clone()))
+        .map_err(|_| UsageError("--frames: png, jpg, exr or none".into()))?;
     let base = args.url.trim_end_matches('/').to_string();
     let mut headers = reqwest::header::HeaderMap::new();
     if let Some(t) = &args.token {
-        headers.insert(reqwest::header::AUTHORIZATION, format!("Bearer {t}").parse().context("token is not a valid header value")?);
+        headers.insert(
+            reqwest::header::AUTHORIZATION,
+            format!("Bearer {t}").parse().context("token is not a valid header value")?,
+        );
     }
     let http = reqwest::Client::builder().default_headers(headers).build()?;
-    let rss_start = server_rss(&http, &base).await;
+    let (rss_start, encode_start, tick_start) = server_figures(&http, &base).await;
 
     // Create the sessions first, so every stream starts together.
     let mut ids = Vec::new();
     for _ in 0..args.sessions {
-        let body = serde_json::json!({"scene": args.scene, "technique": config, "width": args.width, "height": args.height});
-        let resp = http.post(format!("{base}/v1/sessions")).json(&body).send().await.with_context(|| format!("connecting to {base}"))?;
+        let body =
+            serde_json::json!({"scene": args.scene, "technique": config, "width": args.width, "height": args.height});
+        let resp = http
+            .post(format!("{base}/v1/sessions"))
+            .json(&body)
+            .send()
+            .await
+            .with_context(|| format!("connecting to {base}"))?;
         let status = resp.status();
         let v: serde_json::Value = resp.json().await.unwrap_or_default();
         if !status.is_success() {
@@ -157,10 +180,13 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         .collect();
     let mut reports = Vec::new();
     for t in tasks {
-        reports.push(t.await.unwrap_or_else(|e| SessionReport { errors: vec![format!("session task: {e}")], ..Default::default() }));
+        reports.push(
+            t.await
+                .unwrap_or_else(|e| SessionReport { errors: vec![format!("session task: {e}")], ..Default::default() }),
+        );
     }
     let elapsed = started.elapsed().as_secs_f64();
-    let rss_end = server_rss(&http, &base).await;
+    let (rss_end, encode_end, tick_end) = server_figures(&http, &base).await;
     for id in &ids {
         let _ = http.delete(format!("{base}/v1/sessions/{id}")).send().await;
     }
@@ -191,6 +217,11 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         error_samples: errors.into_iter().take(5).collect(),
         server_rss_start_bytes: rss_start,
         server_rss_end_bytes: rss_end,
+        encode_to_tick_ratio: if tick_end > tick_start {
+            (encode_end - encode_start) / (tick_end - tick_start)
+        } else {
+            0.0
+        },
     })
 }
 
@@ -316,13 +347,24 @@ pub fn print_table(r: &LoadReport) {
     println!("relume load: {} sessions of '{}' at {} Hz for {:.1} s", r.sessions, r.scene, r.hz, r.duration_s);
     let rows: Vec<(&str, String)> = vec![
         ("ticks per second (all sessions)", format!("{:.1}", r.ticks_per_second)),
-        ("tick latency p50 / p95 / p99 (ms)", format!("{:.1} / {:.1} / {:.1}", r.latency_p50_ms, r.latency_p95_ms, r.latency_p99_ms)),
+        (
+            "tick latency p50 / p95 / p99 (ms)",
+            format!("{:.1} / {:.1} / {:.1}", r.latency_p50_ms, r.latency_p95_ms, r.latency_p99_ms),
+        ),
         ("frames received / dropped", format!("{} / {}", r.frames_received, r.frames_dropped)),
         ("edits sent / applied / coalesced", format!("{} / {} / {}", r.edits_sent, r.edits_applied, r.edits_coalesced)),
         ("edits lost", r.lost_edits.to_string()),
         ("bytes received", r.bytes_received.to_string()),
         ("errors", r.errors.to_string()),
-        ("server RSS start / end (MiB)", format!("{:.1} / {:.1}", r.server_rss_start_bytes as f64 / 1048576.0, r.server_rss_end_bytes as f64 / 1048576.0)),
+        (
+            "server RSS start / end (MiB)",
+            format!(
+                "{:.1} / {:.1}",
+                r.server_rss_start_bytes as f64 / 1048576.0,
+                r.server_rss_end_bytes as f64 / 1048576.0
+            ),
+        ),
+        ("server encode time / tick time", format!("{:.3}", r.encode_to_tick_ratio)),
     ];
     for (k, v) in rows {
         println!("  {k:<36} {v}");
@@ -337,7 +379,8 @@ pub fn run(args: LoadArgs) -> Result<()> {
     let report = runtime.block_on(run_load(&args))?;
     print_table(&report);
     if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", path.display()))?;
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     if report.errors > 0 || report.lost_edits != 0 {
         return Err(anyhow::anyhow!("{} errors, {} edits lost", report.errors, report.lost_edits));
