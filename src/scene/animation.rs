@@ -94,6 +94,31 @@ pub fn interpolate_trs(a: &Trs, b: &Trs, s: f32) -> Trs {
     }
 }
 
+/// Checks an object or light track (its target exists and is dynamic, its transforms are valid)
+/// and returns its keyframe times. `dynamic` is `None` when no target has that name.
+fn transform_track_times(
+    field: &str,
+    kind: &str,
+    name: &str,
+    dynamic: Option<bool>,
+    keys: &[TransformKey],
+) -> Result<Vec<f32>, SceneError> {
+    match dynamic {
+        None => return Err(invalid(format!("{field}.name"), format!("unknown {kind} '{name}'"))),
+        Some(false) => {
+            return Err(invalid(
+                format!("{field}.name"),
+                format!("{kind} '{name}' is static; animate only dynamic {kind}s"),
+            ))
+        }
+        Some(true) => {}
+    }
+    for (k, key) in keys.iter().enumerate() {
+        validate_trs(&format!("{field}.keyframes[{k}].transform"), &key.transform)?;
+    }
+    Ok(keys.iter().map(|k| k.time).collect())
+}
+
 impl Animation {
     pub fn load(path: &Path) -> Result<Animation, SceneError> {
         let text = std::fs::read_to_string(path)
@@ -110,34 +135,12 @@ impl Animation {
             let field = format!("tracks[{i}]");
             let times: Vec<f32> = match track {
                 Track::Object { name, keyframes } => {
-                    let idx = scene
-                        .object_index(name)
-                        .ok_or_else(|| invalid(format!("{field}.name"), format!("unknown object '{name}'")))?;
-                    if !scene.objects[idx].dynamic {
-                        return Err(invalid(
-                            format!("{field}.name"),
-                            format!("object '{name}' is static; animate only dynamic objects"),
-                        ));
-                    }
-                    for (k, key) in keyframes.iter().enumerate() {
-                        validate_trs(&format!("{field}.keyframes[{k}].transform"), &key.transform)?;
-                    }
-                    keyframes.iter().map(|k| k.time).collect()
+                    let dynamic = scene.object_index(name).map(|i| scene.objects[i].dynamic);
+                    transform_track_times(&field, "object", name, dynamic, keyframes)?
                 }
                 Track::Light { name, keyframes } => {
-                    let idx = scene
-                        .light_index(name)
-                        .ok_or_else(|| invalid(format!("{field}.name"), format!("unknown light '{name}'")))?;
-                    if !scene.lights[idx].dynamic {
-                        return Err(invalid(
-                            format!("{field}.name"),
-                            format!("light '{name}' is static; animate only dynamic lights"),
-                        ));
-                    }
-                    for (k, key) in keyframes.iter().enumerate() {
-                        validate_trs(&format!("{field}.keyframes[{k}].transform"), &key.transform)?;
-                    }
-                    keyframes.iter().map(|k| k.time).collect()
+                    let dynamic = scene.light_index(name).map(|i| scene.lights[i].dynamic);
+                    transform_track_times(&field, "light", name, dynamic, keyframes)?
                 }
                 Track::Camera { keyframes } => {
                     for (k, key) in keyframes.iter().enumerate() {

@@ -169,6 +169,22 @@ pub fn resolve_mesh_path(field: &str, path: &str, scene_dir: &Path, root: &Path)
     Ok(canonical)
 }
 
+/// A name must be non-empty and unique among its kind.
+fn check_name<'a>(
+    field: &str,
+    kind: &str,
+    name: &'a str,
+    seen: &mut std::collections::HashSet<&'a str>,
+) -> Result<(), SceneError> {
+    if name.is_empty() {
+        return Err(invalid(format!("{field}.name"), "must not be empty"));
+    }
+    if !seen.insert(name) {
+        return Err(invalid(format!("{field}.name"), format!("duplicate {kind} name '{name}'")));
+    }
+    Ok(())
+}
+
 /// Degenerate triangles dropped at load: (object name, count).
 pub type DroppedTriangles = Vec<(String, usize)>;
 
@@ -189,12 +205,7 @@ pub fn validate_and_build_meshes(
     let mut cache: std::collections::HashMap<PathBuf, Mesh> = Default::default();
     for (i, o) in desc.objects.iter().enumerate() {
         let field = format!("objects[{i}]");
-        if o.name.is_empty() {
-            return Err(invalid(format!("{field}.name"), "must not be empty"));
-        }
-        if !names.insert(o.name.as_str()) {
-            return Err(invalid(format!("{field}.name"), format!("duplicate object name '{}'", o.name)));
-        }
+        check_name(&field, "object", &o.name, &mut names)?;
         if !desc.materials.contains_key(&o.material) {
             return Err(invalid(format!("{field}.material"), format!("unknown material '{}'", o.material)));
         }
@@ -240,12 +251,7 @@ pub fn validate_and_build_meshes(
     let mut light_names = std::collections::HashSet::new();
     for (i, l) in desc.lights.iter().enumerate() {
         let field = format!("lights[{i}]");
-        if l.name.is_empty() {
-            return Err(invalid(format!("{field}.name"), "must not be empty"));
-        }
-        if !light_names.insert(l.name.as_str()) {
-            return Err(invalid(format!("{field}.name"), format!("duplicate light name '{}'", l.name)));
-        }
+        check_name(&field, "light", &l.name, &mut light_names)?;
         validate_emitter(&format!("{field}.emitter"), &l.emitter)?;
         validate_trs(&format!("{field}.transform"), &l.transform)?;
     }

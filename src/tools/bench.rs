@@ -9,6 +9,7 @@
 //!
 //! Each measurement repeats until `--seconds` have passed; only rates in one run are compared.
 use super::render::load_scene;
+use super::SceneArgs;
 use crate::core::{offset_ray_origin, sampling, Rng, ShadingFrame};
 use crate::embree::{Device, Ray};
 use crate::engine::{thread_pool, Session};
@@ -24,15 +25,8 @@ use std::time::Instant;
 
 #[derive(clap::Args, Debug)]
 pub struct RaysArgs {
-    /// Scene file (JSON).
-    pub scene: PathBuf,
-    #[arg(long)]
-    pub width: Option<u32>,
-    #[arg(long)]
-    pub height: Option<u32>,
-    /// Threads (default: all cores).
-    #[arg(long)]
-    pub threads: Option<usize>,
+    #[command(flatten)]
+    pub target: SceneArgs,
     /// Minimum wall time per measurement, seconds.
     #[arg(long, default_value_t = 1.0)]
     pub seconds: f64,
@@ -181,8 +175,8 @@ fn path_rate(scene: &Scene, config: PathConfig, device: &Device, seconds: f64) -
 }
 
 pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
-    let scene = load_scene(&args.scene, args.width, args.height)?;
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
+    let threads = args.target.threads();
     let pool = thread_pool(threads)?;
     let device = Device::new(threads).context("creating the Embree device")?;
     let accel = SceneAccel::build(&device, &scene)?;
@@ -226,7 +220,7 @@ pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
         }
         bar.finish_and_clear();
         Ok(RaysReport {
-            scene: args.scene.display().to_string(),
+            scene: args.target.scene.display().to_string(),
             width: scene.camera.width,
             height: scene.camera.height,
             threads,

@@ -7,6 +7,33 @@ pub mod serve;
 
 use std::path::{Path, PathBuf};
 
+/// The scene a command renders, at what size, on how many threads (shared by render and bench).
+#[derive(clap::Args, Debug, Clone)]
+pub struct SceneArgs {
+    /// Scene file (JSON).
+    pub scene: PathBuf,
+    /// Image width (default: the scene camera's).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height (default: the scene camera's).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Rendering threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+}
+
+impl SceneArgs {
+    pub fn threads(&self) -> usize {
+        threads_or_all_cores(self.threads)
+    }
+}
+
+/// The requested thread count, or one per core.
+pub fn threads_or_all_cores(requested: Option<usize>) -> usize {
+    requested.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))
+}
+
 /// A mistake in the command line or its input files (exit code 2).
 #[derive(Debug, thiserror::Error)]
 #[error("{0}")]

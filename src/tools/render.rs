@@ -1,6 +1,6 @@
 //! `relume render`: a still image, or an animation rendered through the same session and tick
 //! path the service uses.
-use super::{scenes_root_for, UsageError};
+use super::{scenes_root_for, SceneArgs, UsageError};
 use crate::embree::Device;
 use crate::engine::{thread_pool, Frame, Session};
 use crate::film::{write_image, ImageFormat};
@@ -14,8 +14,8 @@ use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct RenderArgs {
-    /// Scene file (JSON).
-    pub scene: PathBuf,
+    #[command(flatten)]
+    pub target: SceneArgs,
     /// Technique id.
     #[arg(long, default_value = "path")]
     pub technique: String,
@@ -25,13 +25,6 @@ pub struct RenderArgs {
     /// Output file (.png, .jpg or .exr), or a folder with --anim.
     #[arg(long)]
     pub out: PathBuf,
-    #[arg(long)]
-    pub width: Option<u32>,
-    #[arg(long)]
-    pub height: Option<u32>,
-    /// Rendering threads (default: all cores).
-    #[arg(long)]
-    pub threads: Option<usize>,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Exposure in stops for PNG/JPEG output.
@@ -82,9 +75,9 @@ pub fn run(args: RenderArgs) -> Result<()> {
 }
 
 fn make_session(args: &RenderArgs, spp_per_tick: u32) -> Result<(Session, rayon::ThreadPool, Device)> {
-    let scene = load_scene(&args.scene, args.width, args.height)?;
+    let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
     let config = technique_config(&args.technique, spp_per_tick)?;
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let threads = args.target.threads();
     let pool = thread_pool(threads)?;
     let device = Device::new(threads).context("creating the Embree device")?;
     let session = Session::new(scene, &config, args.seed, &device)?;

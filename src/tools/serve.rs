@@ -40,7 +40,7 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
     if args.max_sessions == 0 {
         return Err(UsageError("--max-sessions must be at least 1".into()).into());
     }
-    let threads = args.threads.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
+    let threads = super::threads_or_all_cores(args.threads);
     Ok(ServerConfig {
         scenes_root: args.scenes.canonicalize().with_context(|| format!("resolving {}", args.scenes.display()))?,
         token: args.token.clone().filter(|t| !t.is_empty()),
