@@ -121,6 +121,7 @@ fn regeneration_keeps_lanes_busier() {
         let config = relume::technique::path::PathConfig { regeneration, packet_width: 16, ..path(1) };
         match render(scene, TechniqueConfig::Path(config), 3, 1, 1).stats.detail {
             relume::technique::TechniqueStats::Path(p) => p,
+            other => panic!("path stats expected, got {other:?}"),
         }
     };
     let on = stats(true);

@@ -170,6 +170,42 @@ impl LightGeometry {
         }
     }
 
+    /// Samples an emitted ray for photon tracing: (origin, unit direction, flux / pdf) with the
+    /// origin offset off an area light's surface (robustly, as every spawned ray), and the
+    /// pdf over positions and directions together, so `E[flux/pdf] = power()`. `u_pos` picks
+    /// the point on an area light, `u_dir` the direction (uniform sphere for point lights,
+    /// uniform cone for spots, cosine-weighted for area lights).
+    pub fn sample_emission(&self, u_pos: Vec2, u_dir: Vec2) -> Option<(Vec3, Vec3, Rgb)> {
+        match self {
+            LightGeometry::Point { position, intensity } => {
+                let dir = sampling::uniform_sphere(u_dir);
+                Some((*position, dir, *intensity / sampling::UNIFORM_SPHERE_PDF))
+            }
+            LightGeometry::Spot { position, axis, intensity, cos_falloff_start, cos_falloff_end } => {
+                let local = sampling::uniform_cone(u_dir, *cos_falloff_end);
+                let dir = crate::core::ShadingFrame::from_normal(*axis).to_world(local);
+                let falloff = smoothstep(local.z, *cos_falloff_end, *cos_falloff_start);
+                (falloff > 0.0)
+                    .then(|| (*position, dir, *intensity * (falloff / sampling::uniform_cone_pdf(*cos_falloff_end))))
+            }
+            LightGeometry::Area { radiance, triangles, area, by_area } => {
+                if by_area.is_empty() {
+                    return None;
+                }
+                let (i, _, u0) = by_area.sample(u_pos.x);
+                let [a, b, c] = triangles[i];
+                let bary = sampling::uniform_triangle(Vec2::new(u0, u_pos.y));
+                let on_light = a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y;
+                let n = (b - a).cross(c - a).normalize();
+                let dir = crate::core::ShadingFrame::from_normal(n).to_world(sampling::cosine_hemisphere(u_dir));
+                // Off the light's surface, so the ray cannot hit its own light.
+                let origin = crate::core::offset_ray_origin(on_light, n);
+                // L cosθ / (pdf_A · pdf_ω) = L cosθ / ((1/A) · cosθ/π) = L π A.
+                Some((origin, dir, *radiance * (PI * area)))
+            }
+        }
+    }
+
     /// Radiance leaving an area light's surface with normal `n` towards `w`.
     pub fn emitted(&self, n: Vec3, w: Vec3) -> Rgb {
         match self {

@@ -25,6 +25,7 @@ pub struct Limits {
     pub max_triangles: usize,
     pub max_edits_per_message: usize,
     pub max_spp_per_tick: u32,
+    pub max_photon_paths: u32,
     pub max_tick_hz: f32,
     /// How long `GET frame?tick=N` waits for tick N.
     pub frame_wait: Duration,
@@ -41,6 +42,7 @@ impl Default for Limits {
             max_triangles: 4_000_000,
             max_edits_per_message: 4096,
             max_spp_per_tick: 64,
+            max_photon_paths: 4_000_000,
             max_tick_hz: 120.0,
             frame_wait: Duration::from_secs(10),
             request_timeout: Duration::from_secs(60),
@@ -199,11 +201,18 @@ impl AppState {
             )));
         }
         let technique = req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default()));
-        let TechniqueConfig::Path(p) = &technique;
-        if p.spp > limits.max_spp_per_tick {
+        if technique.spp_per_tick() > limits.max_spp_per_tick {
             return Err(ApiError::too_large(format!(
                 "technique.spp: {} exceeds the limit of {} per tick",
-                p.spp, limits.max_spp_per_tick
+                technique.spp_per_tick(),
+                limits.max_spp_per_tick
+            )));
+        }
+        if technique.photon_paths() > limits.max_photon_paths {
+            return Err(ApiError::too_large(format!(
+                "technique.paths: {} exceeds the limit of {} photon paths per session",
+                technique.photon_paths(),
+                limits.max_photon_paths
             )));
         }
         if let Some(hz) = req.tick_hz {

@@ -5,7 +5,9 @@
 //! A technique is driven by the engine once per tick: `update` sees what the edits changed
 //! (verify, invalidate, retrace), then `render` adds samples to the film. Per-tick calls go
 //! through `Box<dyn Technique>`; per-ray variety inside a technique is a closed `enum`.
+pub mod nee;
 pub mod path;
+pub mod photon_reuse;
 
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -66,6 +68,7 @@ pub struct RenderStats {
 #[serde(tag = "id", rename_all = "snake_case")]
 pub enum TechniqueStats {
     Path(path::PathStats),
+    PhotonReuse(photon_reuse::PhotonStats),
 }
 
 /// Which technique to run, with its parameters. JSON: `{"id": "path", "spp": 4, ...}`.
@@ -73,12 +76,30 @@ pub enum TechniqueStats {
 #[serde(tag = "id", rename_all = "snake_case")]
 pub enum TechniqueConfig {
     Path(path::PathConfig),
+    PhotonReuse(photon_reuse::PhotonReuseConfig),
 }
 
 impl TechniqueConfig {
     pub fn id(&self) -> &'static str {
         match self {
             TechniqueConfig::Path(_) => "path",
+            TechniqueConfig::PhotonReuse(_) => "photon_reuse",
+        }
+    }
+
+    /// Camera samples per pixel each tick renders.
+    pub fn spp_per_tick(&self) -> u32 {
+        match self {
+            TechniqueConfig::Path(c) => c.spp,
+            TechniqueConfig::PhotonReuse(c) => c.spp,
+        }
+    }
+
+    /// Resident photon paths the technique keeps (0 for techniques without any).
+    pub fn photon_paths(&self) -> u32 {
+        match self {
+            TechniqueConfig::Path(_) => 0,
+            TechniqueConfig::PhotonReuse(c) => c.paths,
         }
     }
 }
@@ -104,5 +125,6 @@ pub trait Technique: Send {
 pub fn build(config: &TechniqueConfig, scene: &Scene) -> Result<Box<dyn Technique>, TechniqueError> {
     match config {
         TechniqueConfig::Path(c) => Ok(Box::new(path::PathTracer::new(c.clone(), scene)?)),
+        TechniqueConfig::PhotonReuse(c) => Ok(Box::new(photon_reuse::PhotonReuse::new(c.clone(), scene)?)),
     }
 }

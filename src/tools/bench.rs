@@ -159,7 +159,9 @@ fn path_rate(scene: &Scene, config: PathConfig, device: &Device, seconds: f64) -
     while paths == 0 || start.elapsed().as_secs_f64() < seconds {
         let frame = session.tick()?;
         rays += frame.stats.rays.total();
-        let TechniqueStats::Path(p) = frame.stats.detail;
+        let TechniqueStats::Path(p) = frame.stats.detail else {
+            anyhow::bail!("bench rays measures the path technique only");
+        };
         paths += p.paths;
         lanes += p.lane_steps;
         active += p.active_lane_steps;

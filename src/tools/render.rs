@@ -7,6 +7,7 @@ use crate::film::{write_image, ImageFormat};
 use crate::scene::animation::Animation;
 use crate::scene::Scene;
 use crate::technique::path::PathConfig;
+use crate::technique::photon_reuse::PhotonReuseConfig;
 use crate::technique::TechniqueConfig;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -45,7 +46,8 @@ pub struct RenderArgs {
 pub fn technique_config(id: &str, spp: u32) -> Result<TechniqueConfig> {
     match id {
         "path" => Ok(TechniqueConfig::Path(PathConfig { spp, ..PathConfig::default() })),
-        other => Err(UsageError(format!("unknown technique '{other}' (available: path)")).into()),
+        "photon_reuse" => Ok(TechniqueConfig::PhotonReuse(PhotonReuseConfig { spp, ..PhotonReuseConfig::default() })),
+        other => Err(UsageError(format!("unknown technique '{other}' (available: path, photon_reuse)")).into()),
     }
 }
 

@@ -22,13 +22,11 @@ use crate::core::{offset_ray_origin, sampling::power_heuristic, Rgb, Rng};
 use crate::embree::{Hit, Ray};
 use crate::film::PixelAccum;
 use crate::scene::{Scene, SceneAccel, SurfaceId};
+use crate::technique::nee::sample_next_event;
 use glam::Vec3;
 
 /// Widest packet Embree offers.
 pub const MAX_LANES: usize = 16;
-
-/// Relative shortening of shadow rays so they stop just before the sampled light point.
-const SHADOW_EPSILON: f32 = 1e-4;
 
 /// How one chunk of pixels is traced.
 #[derive(Clone, Copy, Debug)]
@@ -254,21 +252,9 @@ fn shade(lane: &mut Lane, hit: Option<Hit>, scene: &Scene, accel: &SceneAccel, m
     // Next-event estimation towards one light chosen by power.
     let mut shadow = None;
     if !material.is_specular() {
-        if let Some(select) = &scene.light_selection {
-            let (li, pmf, _) = select.sample(lane.rng.next_f32());
-            let u = lane.rng.next_2d();
-            let light = &scene.lights[li].geometry;
-            let origin_side = if n.dot(wo) >= 0.0 { n } else { -n };
-            if let Some(s) = light.sample_incident(offset_ray_origin(sp.p, origin_side), u) {
-                let f = material.eval(n, wo, s.wi);
-                if !f.is_black() && s.pdf > 0.0 {
-                    let light_pdf = s.pdf * pmf;
-                    let weight = if s.delta { 1.0 } else { power_heuristic(light_pdf, material.pdf(n, wo, s.wi)) };
-                    lane.pending = lane.beta * f * s.li * (s.wi.dot(n).abs() * weight / light_pdf);
-                    let origin = offset_ray_origin(sp.p, origin_side);
-                    shadow = Some(Ray { origin, dir: s.wi, tnear: 0.0, tfar: s.dist * (1.0 - SHADOW_EPSILON) });
-                }
-            }
+        if let Some(ne) = sample_next_event(scene, material, sp.p, n, wo, &mut lane.rng, true) {
+            lane.pending = lane.beta * ne.contribution;
+            shadow = Some(ne.shadow);
         }
     }
 

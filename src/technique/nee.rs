@@ -1,0 +1,49 @@
+//! Next-event estimation shared by the techniques: pick one light by power, sample a point on
+//! it, and return the contribution that counts if the shadow ray towards it is unoccluded.
+use crate::core::sampling::power_heuristic;
+use crate::core::{offset_ray_origin, Rgb, Rng};
+use crate::embree::Ray;
+use crate::scene::{Material, Scene};
+use glam::Vec3;
+
+/// Relative shortening of shadow rays so they stop just before the sampled light point.
+pub const SHADOW_EPSILON: f32 = 1e-4;
+
+/// A light sample waiting for its shadow ray.
+#[derive(Clone, Copy, Debug)]
+pub struct NextEvent {
+    pub shadow: Ray,
+    /// `f · L_i · |cos θ_i| / pdf`, times the MIS weight; per unit path throughput.
+    pub contribution: Rgb,
+}
+
+/// Samples direct light at `p` (unit geometric normal `n`, outgoing `wo`) on a non-specular
+/// material. With `mis_with_bsdf`, area-light samples carry the power-heuristic weight against
+/// BSDF sampling (the caller must then also count BSDF-sampled emission hits with the matching
+/// weight); without it the estimate stands alone. Consumes three random numbers.
+pub fn sample_next_event(
+    scene: &Scene,
+    material: &Material,
+    p: Vec3,
+    n: Vec3,
+    wo: Vec3,
+    rng: &mut Rng,
+    mis_with_bsdf: bool,
+) -> Option<NextEvent> {
+    let select = scene.light_selection.as_ref()?;
+    let (li, pmf, _) = select.sample(rng.next_f32());
+    let u = rng.next_2d();
+    let side = if n.dot(wo) >= 0.0 { n } else { -n };
+    let origin = offset_ray_origin(p, side);
+    let s = scene.lights[li].geometry.sample_incident(origin, u)?;
+    let f = material.eval(n, wo, s.wi);
+    if f.is_black() || s.pdf <= 0.0 {
+        return None;
+    }
+    let light_pdf = s.pdf * pmf;
+    let weight = if s.delta || !mis_with_bsdf { 1.0 } else { power_heuristic(light_pdf, material.pdf(n, wo, s.wi)) };
+    Some(NextEvent {
+        shadow: Ray { origin, dir: s.wi, tnear: 0.0, tfar: s.dist * (1.0 - SHADOW_EPSILON) },
+        contribution: f * s.li * (s.wi.dot(n).abs() * weight / light_pdf),
+    })
+}

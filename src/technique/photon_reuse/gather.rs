@@ -1,0 +1,216 @@
+//! Rendering a frame from the photon paths: camera rays follow ideal mirror and glass chains to
+//! the first diffuse hit, where direct light comes from next-event estimation and indirect light
+//! from a density estimate over the stored photons.
+//!
+//! The density estimate uses photons from the second bounce on (the first hit of a path is
+//! direct light, which NEE already counts; light reaching a diffuse surface through a specular
+//! chain is counted by photons) with a uniform disc kernel of radius r:
+//! L_o(x, ω_o) ≈ Σ_p f_r(ω_o, ω_p) Φ_p / (π r²) over photons within r on the same side of the
+//! surface. The paper splats photons in screen space on a GPU; on the CPU a gather through a
+//! spatial hash grid (cell size 2r, so a query visits at most 8 cells) is the natural
+//! equivalent, and it costs work per pixel rather than per photon.
+use super::store::PathStore;
+use crate::core::{offset_ray_origin, Rgb, Rng};
+use crate::embree::Ray;
+use crate::film::PixelAccum;
+use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
+use crate::technique::nee::sample_next_event;
+use glam::{IVec3, Vec3};
+
+/// Longest specular chain a camera ray follows before it gives up.
+const MAX_SPECULAR_CHAIN: u32 = 16;
+
+#[derive(Clone, Copy, Debug)]
+struct GridPhoton {
+    position: Vec3,
+    /// Direction towards where the photon came from (ω_p).
+    towards_source: Vec3,
+    power: Rgb,
+}
+
+/// Photons bucketed by a hash of their grid cell.
+#[derive(Clone, Debug, Default)]
+pub struct PhotonGrid {
+    pub radius: f32,
+    inv_cell: f32,
+    mask: u64,
+    /// `starts[b]..starts[b + 1]` are bucket b's photons.
+    starts: Vec<u32>,
+    photons: Vec<GridPhoton>,
+}
+
+fn cell_of(p: Vec3, inv_cell: f32) -> IVec3 {
+    (p * inv_cell).floor().as_ivec3()
+}
+
+fn bucket(c: IVec3, mask: u64) -> usize {
+    let h = (c.x as i64 as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (c.y as i64 as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F)
+        ^ (c.z as i64 as u64).wrapping_mul(0x1656_67B1_9E37_79F9);
+    (crate::core::rng::mix64(h) & mask) as usize
+}
+
+impl PhotonGrid {
+    /// Gathers every photon from row 1 on that lies on a diffuse surface.
+    pub fn build(scene: &Scene, store: &PathStore, radius: f32) -> PhotonGrid {
+        let mut photons = Vec::new();
+        for (row_index, row) in store.rows.iter().enumerate().skip(1) {
+            for path in 0..store.paths {
+                if (store.word[path].photons() as usize) <= row_index {
+                    continue;
+                }
+                let object = row.object[path] as usize;
+                if scene.materials[scene.objects[object].material as usize].is_specular() {
+                    continue;
+                }
+                photons.push(GridPhoton {
+                    position: row.position[path],
+                    towards_source: -row.incoming[path],
+                    power: row.power[path],
+                });
+            }
+        }
+        let inv_cell = 1.0 / (2.0 * radius);
+        let table = (photons.len().max(1) * 2).next_power_of_two();
+        let mask = table as u64 - 1;
+        // Counting sort by bucket.
+        let keys: Vec<usize> = photons.iter().map(|p| bucket(cell_of(p.position, inv_cell), mask)).collect();
+        let mut starts = vec![0u32; table + 1];
+        for &k in &keys {
+            starts[k + 1] += 1;
+        }
+        for i in 0..table {
+            starts[i + 1] += starts[i];
+        }
+        let mut fill = starts.clone();
+        let mut sorted =
+            vec![GridPhoton { position: Vec3::ZERO, towards_source: Vec3::ZERO, power: Rgb::BLACK }; photons.len()];
+        for (p, &k) in photons.iter().zip(&keys) {
+            sorted[fill[k] as usize] = *p;
+            fill[k] += 1;
+        }
+        PhotonGrid { radius, inv_cell, mask, starts, photons: sorted }
+    }
+
+    pub fn len(&self) -> usize {
+        self.photons.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.photons.is_empty()
+    }
+
+    pub fn memory_bytes(&self) -> u64 {
+        (self.photons.len() * std::mem::size_of::<GridPhoton>() + self.starts.len() * 4) as u64
+    }
+
+    /// Reflected radiance at `p` (unit normal `n`) towards `wo` from photons within the radius.
+    pub fn radiance(&self, material: &Material, p: Vec3, n: Vec3, wo: Vec3) -> Rgb {
+        if self.photons.is_empty() {
+            return Rgb::BLACK;
+        }
+        let r2 = self.radius * self.radius;
+        let lo = cell_of(p - Vec3::splat(self.radius), self.inv_cell);
+        let hi = cell_of(p + Vec3::splat(self.radius), self.inv_cell);
+        let mut buckets = [usize::MAX; 8];
+        let mut count = 0;
+        for z in lo.z..=hi.z {
+            for y in lo.y..=hi.y {
+                for x in lo.x..=hi.x {
+                    let b = bucket(IVec3::new(x, y, z), self.mask);
+                    if !buckets[..count].contains(&b) && count < 8 {
+                        buckets[count] = b;
+                        count += 1;
+                    }
+                }
+            }
+        }
+        let side = n.dot(wo);
+        let mut sum = Rgb::BLACK;
+        for &b in &buckets[..count] {
+            for ph in &self.photons[self.starts[b] as usize..self.starts[b + 1] as usize] {
+                if (ph.position - p).length_squared() <= r2 && ph.towards_source.dot(n) * side > 0.0 {
+                    sum += material.eval(n, wo, ph.towards_source) * ph.power;
+                }
+            }
+        }
+        sum / (std::f32::consts::PI * r2)
+    }
+}
+
+/// Ray counts of one render pass.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct RenderRays {
+    pub camera: u64,
+    pub specular: u64,
+    pub shadow: u64,
+}
+
+impl RenderRays {
+    pub fn merge(self, o: RenderRays) -> RenderRays {
+        RenderRays {
+            camera: self.camera + o.camera,
+            specular: self.specular + o.specular,
+            shadow: self.shadow + o.shadow,
+        }
+    }
+}
+
+/// One sample for each pixel of `chunk` (pixels `first..`), added to the film.
+pub fn render_chunk(
+    scene: &Scene,
+    accel: &SceneAccel,
+    grid: &PhotonGrid,
+    stream: (u64, u64, u64),
+    first: usize,
+    chunk: &mut [PixelAccum],
+) -> RenderRays {
+    let (seed, tick, pass) = stream;
+    let width = scene.camera.width as usize;
+    let mut rays = RenderRays::default();
+    for (offset, pixel) in chunk.iter_mut().enumerate() {
+        let index = first + offset;
+        let mut rng = Rng::for_sample(seed, tick, index as u64, pass);
+        let j = rng.next_2d();
+        let mut ray = scene.camera.ray((index % width) as f32 + j.x, (index / width) as f32 + j.y);
+        let mut beta = Rgb::WHITE;
+        let mut radiance = Rgb::BLACK;
+        rays.camera += 1;
+        for depth in 0..MAX_SPECULAR_CHAIN {
+            if depth > 0 {
+                rays.specular += 1;
+            }
+            let Some(hit) = accel.scene().intersect1(&ray) else { break };
+            let Some((surface, prim)) = accel.resolve(&hit) else { break };
+            let sp = scene.surface_point(surface, prim, hit.u, hit.v);
+            let wo = -ray.dir;
+            let SurfaceId::Object(object) = surface else {
+                // Seen directly or through mirrors and glass: NEE cannot reach it there.
+                if let SurfaceId::Light(l) = surface {
+                    radiance += beta * scene.lights[l as usize].geometry.emitted(sp.n, wo);
+                }
+                break;
+            };
+            let material = &scene.materials[scene.objects[object as usize].material as usize];
+            if material.is_specular() {
+                let Some(bs) = material.sample(sp.n, wo, rng.next_2d(), rng.next_f32()) else { break };
+                beta *= bs.weight;
+                let side = if sp.n.dot(bs.wi) >= 0.0 { sp.n } else { -sp.n };
+                ray = Ray::new(offset_ray_origin(sp.p, side), bs.wi);
+                continue;
+            }
+            // Diffuse: direct light by NEE, indirect light from the photons.
+            if let Some(ne) = sample_next_event(scene, material, sp.p, sp.n, wo, &mut rng, false) {
+                rays.shadow += 1;
+                if !accel.scene().occluded1(&ne.shadow) {
+                    radiance += beta * ne.contribution;
+                }
+            }
+            radiance += beta * grid.radiance(material, sp.p, sp.n, wo);
+            break;
+        }
+        pixel.add(radiance);
+        pixel.count += 1.0;
+    }
+    rays
+}

@@ -1,0 +1,176 @@
+//! The path store: N photon paths of up to B photons each, as structure-of-arrays, bounce-major
+//! (Moreau et al. 2019, §4): row i holds the i-th photon of every path, so a pass over "bounce i
+//! of all paths" reads contiguous memory.
+//!
+//! Segment k of a path runs from its start (the light point for k = 0, photon k−1 otherwise) to
+//! photon k. A path whose last segment left the scene keeps that segment's direction
+//! (`escape`), so an object moving into it is still noticed. Units: positions in meters, power
+//! in watts (flux per photon), directions unit length.
+use crate::core::Rgb;
+use glam::Vec3;
+
+/// Row i of the store: photon i of every path.
+#[derive(Clone, Debug, Default)]
+pub struct PhotonRow {
+    pub position: Vec<Vec3>,
+    /// Direction of travel arriving at the photon (pointing into the surface).
+    pub incoming: Vec<Vec3>,
+    /// Object index of the surface the photon lies on.
+    pub object: Vec<u32>,
+    /// Triangle of that object (for the surface normal when a ray leaves the photon).
+    pub prim: Vec<u32>,
+    /// Flux arriving with the photon.
+    pub power: Vec<Rgb>,
+}
+
+impl PhotonRow {
+    fn with_len(n: usize) -> PhotonRow {
+        PhotonRow {
+            position: vec![Vec3::ZERO; n],
+            incoming: vec![Vec3::ZERO; n],
+            object: vec![0; n],
+            prim: vec![0; n],
+            power: vec![Rgb::BLACK; n],
+        }
+    }
+
+    /// Bytes per photon: position 12, incoming 12, object 4, triangle 4, power 12. The paper's
+    /// photon is 32 bytes (no triangle, a radius instead); the triangle buys robust ray offsets
+    /// when a path is retraced from a stored photon, and the radius is global here.
+    pub const PHOTON_BYTES: usize = 44;
+}
+
+/// The 32-bit path word of the paper's §4: distribution-map cell (22 bits), segment count (4),
+/// segment to retrace from (4), replace flag (1), reuse-light flag (1).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PathWord(pub u32);
+
+impl PathWord {
+    const CELL_BITS: u32 = 22;
+    const COUNT_SHIFT: u32 = 22;
+    const FROM_SHIFT: u32 = 26;
+    const REPLACE_BIT: u32 = 1 << 30;
+    const REUSE_LIGHT_BIT: u32 = 1 << 31;
+    /// Largest photon count a path word can hold.
+    pub const MAX_PHOTONS: u32 = 15;
+
+    pub fn cell(self) -> u32 {
+        self.0 & ((1 << Self::CELL_BITS) - 1)
+    }
+    /// Photons on the path (0..=15).
+    pub fn photons(self) -> u32 {
+        (self.0 >> Self::COUNT_SHIFT) & 0xF
+    }
+    /// The segment retracing starts from (meaningful when `replace` is set).
+    pub fn retrace_from(self) -> u32 {
+        (self.0 >> Self::FROM_SHIFT) & 0xF
+    }
+    pub fn replace(self) -> bool {
+        self.0 & Self::REPLACE_BIT != 0
+    }
+    pub fn reuse_light(self) -> bool {
+        self.0 & Self::REUSE_LIGHT_BIT != 0
+    }
+
+    pub fn with_photons(self, n: u32) -> PathWord {
+        PathWord((self.0 & !(0xF << Self::COUNT_SHIFT)) | ((n.min(Self::MAX_PHOTONS)) << Self::COUNT_SHIFT))
+    }
+    /// Marks the path for retracing from `segment`.
+    pub fn retrace(self, segment: u32) -> PathWord {
+        PathWord((self.0 & !(0xF << Self::FROM_SHIFT)) | ((segment & 0xF) << Self::FROM_SHIFT) | Self::REPLACE_BIT)
+    }
+    pub fn cleared(self) -> PathWord {
+        PathWord(self.0 & !Self::REPLACE_BIT)
+    }
+}
+
+/// All resident paths.
+#[derive(Clone, Debug)]
+pub struct PathStore {
+    pub paths: usize,
+    pub max_photons: usize,
+    /// `rows[i]` holds photon i of every path.
+    pub rows: Vec<PhotonRow>,
+    pub word: Vec<PathWord>,
+    /// Which light emitted the path.
+    pub light: Vec<u16>,
+    /// Emission point: stored only when some light has a shape (area lights); point and spot
+    /// paths start at their light's position.
+    pub origin: Option<Vec<Vec3>>,
+    /// Direction and flux of segment 0.
+    pub emit_dir: Vec<Vec3>,
+    pub emit_power: Vec<Rgb>,
+    /// Direction of the last segment if it left the scene; zero if the path ended on a surface.
+    pub escape: Vec<Vec3>,
+    /// Bumped whenever the path is retraced, so the new tail draws fresh random numbers.
+    pub generation: Vec<u32>,
+}
+
+/// Bytes per structure, reported in the stats.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct StoreMemory {
+    pub photon_map: u64,
+    pub path_words: u64,
+    pub origins: u64,
+    pub segment0_and_escape: u64,
+    pub generations: u64,
+}
+
+impl StoreMemory {
+    pub fn total(&self) -> u64 {
+        self.photon_map + self.path_words + self.origins + self.segment0_and_escape + self.generations
+    }
+}
+
+impl PathStore {
+    pub fn new(paths: usize, max_photons: usize, with_origins: bool) -> PathStore {
+        PathStore {
+            paths,
+            max_photons,
+            rows: (0..max_photons).map(|_| PhotonRow::with_len(paths)).collect(),
+            word: vec![PathWord::default(); paths],
+            light: vec![0; paths],
+            origin: with_origins.then(|| vec![Vec3::ZERO; paths]),
+            emit_dir: vec![Vec3::ZERO; paths],
+            emit_power: vec![Rgb::BLACK; paths],
+            escape: vec![Vec3::ZERO; paths],
+            generation: vec![0; paths],
+        }
+    }
+
+    pub fn memory(&self) -> StoreMemory {
+        let n = self.paths as u64;
+        StoreMemory {
+            photon_map: n * self.max_photons as u64 * PhotonRow::PHOTON_BYTES as u64,
+            path_words: n * 4 + n * 2,
+            origins: self.origin.as_ref().map_or(0, |o| o.len() as u64 * 12),
+            segment0_and_escape: n * (12 + 12 + 12),
+            generations: n * 4,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn path_word_fields_are_independent() {
+        let w = PathWord(0x1234).with_photons(7).retrace(3);
+        assert_eq!(
+            (w.cell(), w.photons(), w.retrace_from(), w.replace(), w.reuse_light()),
+            (0x1234, 7, 3, true, false)
+        );
+        let w = w.cleared().with_photons(15);
+        assert_eq!((w.cell(), w.photons(), w.replace()), (0x1234, 15, false));
+        assert_eq!(PathWord(0).with_photons(99).photons(), 15);
+    }
+
+    #[test]
+    fn memory_matches_the_layout() {
+        let s = PathStore::new(1000, 7, false);
+        assert_eq!(s.memory().photon_map, 1000 * 7 * 44);
+        assert_eq!(s.memory().origins, 0);
+        assert_eq!(PathStore::new(10, 2, true).memory().origins, 120);
+    }
+}

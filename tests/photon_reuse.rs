@@ -1,0 +1,169 @@
+//! photon_reuse against analytic answers and the `path` reference, and its reuse behaviour.
+mod common;
+use common::*;
+use relume::embree::Device;
+use relume::engine::Session;
+use relume::scene::edits::Edit;
+use relume::scene::Trs;
+use relume::technique::photon_reuse::{PhotonReuseConfig, PhotonStats, ReuseMode};
+use relume::technique::{TechniqueConfig, TechniqueStats};
+
+fn config(paths: u32, reuse: ReuseMode) -> PhotonReuseConfig {
+    PhotonReuseConfig { paths, reuse, ..PhotonReuseConfig::default() }
+}
+
+fn stats(frame: &relume::engine::Frame) -> PhotonStats {
+    match &frame.stats.detail {
+        TechniqueStats::PhotonReuse(s) => s.clone(),
+        other => panic!("photon_reuse stats expected, got {other:?}"),
+    }
+}
+
+#[test]
+fn furnace_matches_the_analytic_radiance_within_one_percent() {
+    // Property: NEE plus the photon density estimate reproduce L = ρI/(πR²(1−ρ)) = 1/π. In a
+    // sphere the irradiance is uniform, so the kernel adds no bias; B = 15 makes the truncation
+    // (ρ^15 ≈ 3e-5) negligible. The bound includes 3.3 standard errors over independent seeds.
+    let expected = 1.0 / std::f64::consts::PI;
+    for reuse in [ReuseMode::Off, ReuseMode::Naive] {
+        let xs: Vec<f64> = (0..8)
+            .map(|seed| {
+                let mut scene = load("furnace.json");
+                scene.set_resolution(24, 24);
+                let c = PhotonReuseConfig { max_photons: 15, ..config(300_000, reuse) };
+                render(scene, TechniqueConfig::PhotonReuse(c), 50 + seed, 2, 2).image.mean().g as f64
+            })
+            .collect();
+        let (mean, se) = mean_and_standard_error(&xs);
+        eprintln!("furnace {reuse:?}: {mean:.5} ± {se:.5} (expected {expected:.5})");
+        assert!((mean - expected).abs() + 3.3 * se < 0.01 * expected, "{reuse:?}: {mean} vs {expected}");
+    }
+}
+
+#[test]
+fn cornell_box_matches_the_path_reference() {
+    // Property: the photon estimate converges to the path tracer's image. Compared: the mean of
+    // each channel (tolerance 3%: the disc kernel's blur at corners and B = 7 truncation cost
+    // about 1.5% here) and 4×4 block means (10%), at a photon count the test can afford.
+    let mut scene = load("cornell-box.json");
+    scene.set_resolution(48, 48);
+    let reference = render(
+        scene.clone(),
+        TechniqueConfig::Path(relume::technique::path::PathConfig { admitted_truncation: 1e-3, ..path(96) }),
+        3,
+        1,
+        2,
+    )
+    .image;
+    let photons = render(scene, TechniqueConfig::PhotonReuse(config(300_000, ReuseMode::Naive)), 3, 24, 2).image;
+    assert_finite_non_negative(&photons);
+    let (a, b) = (photons.mean(), reference.mean());
+    eprintln!("cornell: photon_reuse {a:?} path {b:?}");
+    for (x, y) in a.to_array().iter().zip(b.to_array()) {
+        assert!((x - y).abs() < 0.03 * y, "channel {x} vs {y}");
+    }
+    let block = |img: &relume::film::LinearImage, bx: u32, by: u32| {
+        let mut s = 0.0f64;
+        for y in by * 12..(by + 1) * 12 {
+            for x in bx * 12..(bx + 1) * 12 {
+                s += img.get(x, y).luminance() as f64;
+            }
+        }
+        s / 144.0
+    };
+    for by in 0..4 {
+        for bx in 0..4 {
+            let (p, r) = (block(&photons, bx, by), block(&reference, bx, by));
+            assert!((p - r).abs() < 0.10 * r + 0.002, "block ({bx},{by}): {p} vs {r}");
+        }
+    }
+}
+
+#[test]
+fn a_static_scene_retraces_nothing_after_the_first_tick_and_accumulates() {
+    let mut scene = load("bunnies-1.json");
+    scene.set_resolution(16, 16);
+    let device = Device::new(1).unwrap();
+    let mut s =
+        Session::new(scene, &TechniqueConfig::PhotonReuse(config(20_000, ReuseMode::Naive)), 1, &device).unwrap();
+    let first = s.tick().unwrap();
+    assert_eq!(stats(&first).fully_retraced, 20_000);
+    for _ in 0..3 {
+        let f = s.tick().unwrap();
+        let st = stats(&f);
+        assert_eq!((st.untouched, st.partly_retraced, st.fully_retraced, st.retrace_rays), (20_000, 0, 0, 0));
+        assert_eq!(f.accumulation_id, first.accumulation_id);
+    }
+    assert_eq!(s.film().passes, 4);
+    // A camera edit restarts the film but retraces no path: photons do not depend on the view.
+    s.queue_edits(vec![Edit::Camera {
+        position: Some([278.0, 273.0, -700.0]),
+        look_at: None,
+        up: None,
+        vfov_deg: None,
+    }])
+    .unwrap();
+    let f = s.tick().unwrap();
+    assert_eq!(stats(&f).untouched, 20_000);
+    assert_ne!(f.accumulation_id, first.accumulation_id);
+}
+
+#[test]
+fn naive_mode_retraces_only_what_a_move_touches_and_matches_the_baseline() {
+    // Property: after a bunny moves, naive mode retraces a fraction of the paths (off retraces
+    // all), and both images estimate the same radiance.
+    let run = |reuse: ReuseMode| {
+        let mut scene = load("bunnies-1.json");
+        scene.set_resolution(32, 32);
+        let device = Device::new(2).unwrap();
+        let pool = relume::engine::thread_pool(2).unwrap();
+        pool.install(|| {
+            let mut s = Session::new(scene, &TechniqueConfig::PhotonReuse(config(150_000, reuse)), 9, &device).unwrap();
+            s.tick().unwrap();
+            let moved =
+                Trs { translation: [350.0, 0.0, 250.0], rotation: [0.0, 0.0, 0.0, 1.0], scale: [150.0, 150.0, 150.0] };
+            s.queue_edits(vec![Edit::Object { name: "bunny-1".into(), transform: moved }]).unwrap();
+            let after = s.tick().unwrap();
+            let st = stats(&after);
+            let mut last = after;
+            for _ in 0..15 {
+                last = s.tick().unwrap();
+            }
+            (st, last.image.mean())
+        })
+    };
+    let (naive, naive_mean) = run(ReuseMode::Naive);
+    let (off, off_mean) = run(ReuseMode::Off);
+    eprintln!("naive: {naive:?}\noff: {off:?}");
+    assert_eq!(off.fully_retraced, 150_000);
+    let touched = naive.partly_retraced + naive.fully_retraced;
+    assert!(touched > 0 && touched < 150_000 / 2, "naive retraced {touched} of 150000");
+    assert!(
+        naive.retrace_rays < off.retrace_rays / 2,
+        "naive traced {} rays, off {}",
+        naive.retrace_rays,
+        off.retrace_rays
+    );
+    assert!(naive.verify_box_tests > 0);
+    for (x, y) in naive_mean.to_array().iter().zip(off_mean.to_array()) {
+        assert!((x - y).abs() < 0.04 * y, "naive {naive_mean:?} vs off {off_mean:?}");
+    }
+}
+
+#[test]
+fn bad_configurations_are_rejected_naming_the_field() {
+    let scene = load("cornell-box.json");
+    for (c, field) in [
+        (PhotonReuseConfig { paths: 0, ..PhotonReuseConfig::default() }, "paths"),
+        (PhotonReuseConfig { max_photons: 16, ..PhotonReuseConfig::default() }, "max_photons"),
+        (PhotonReuseConfig { radius: Some(f32::NAN), ..PhotonReuseConfig::default() }, "radius"),
+        (PhotonReuseConfig { spp: 0, ..PhotonReuseConfig::default() }, "spp"),
+    ] {
+        match relume::technique::build(&TechniqueConfig::PhotonReuse(c), &scene) {
+            Err(relume::technique::TechniqueError::InvalidConfig { field: f, .. }) => assert_eq!(f, field),
+            Ok(_) => panic!("{field} accepted"),
+        }
+    }
+    let parsed: Result<TechniqueConfig, _> = serde_json::from_str(r#"{"id": "photon_reuse", "reuse": "sometimes"}"#);
+    assert!(parsed.is_err());
+}
