@@ -4,11 +4,12 @@
 //! - `relume render SCENE.json --technique path --spp N --out FILE.(png|jpg|exr)`
 //! - `relume render SCENE.json --anim NAME.anim.json --frames N --out DIR/`
 //! - `relume bench rays SCENE.json [--json FILE]`
+//! - `relume bench reuse SCENE.json --anim NAME.anim.json --frames F [--paths N] [--json FILE]`
 //! - `relume load --url URL --scene NAME --anim NAME.anim.json --sessions N --hz H --duration 60s`
 //!
 //! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
 use clap::{Parser, Subcommand};
-use relume::tools::{bench, load, render, serve};
+use relume::tools::{bench, bench_reuse, load, render, serve};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -41,6 +42,8 @@ enum Command {
 enum BenchCommand {
     /// Raw Embree throughput and the path tracer's ray rate, with and without path regeneration.
     Rays(bench::RaysArgs),
+    /// Photon path reuse modes (off, naive) over the same animation.
+    Reuse(bench_reuse::ReuseArgs),
 }
 
 fn main() -> ExitCode {
@@ -54,6 +57,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render::run(args),
         Command::Load(args) => load::run(args),
         Command::Bench { which: BenchCommand::Rays(args) } => bench::rays(args),
+        Command::Bench { which: BenchCommand::Reuse(args) } => bench_reuse::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -157,3 +157,35 @@ fn bench_rays_reports_rates_and_regeneration_rows() {
         |variant: &str| rows.iter().find(|r| r["variant"] == variant).unwrap()["mean_reflectance"].as_f64().unwrap();
     assert!(rho("dark") < rho("normal") && rho("normal") < rho("bright"));
 }
+
+#[test]
+fn bench_reuse_reports_each_mode_with_the_named_fields() {
+    let json = out_dir("reuse").join("reuse.json");
+    let out = relume()
+        .args([
+            "bench",
+            "reuse",
+            scene("bunnies-1.json").to_str().unwrap(),
+            "--anim",
+            scene("bunnies-1.anim.json").to_str().unwrap(),
+        ])
+        .args(["--frames", "4", "--paths", "4000", "--width", "16", "--height", "16", "--threads", "1", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let modes = v["modes"].as_array().unwrap();
+    assert_eq!(modes.iter().map(|m| m["mode"].as_str().unwrap()).collect::<Vec<_>>(), ["off", "naive"]);
+    for m in modes {
+        assert_eq!(m["frames"].as_array().unwrap().len(), 3, "frame 0 is reported as initial");
+        let f = &m["frames"][0];
+        assert!(f["rays_traced"].is_u64() && f["tick_ms"].is_f64() && f["stages_ms"]["verify"].is_f64());
+        for key in ["rays_per_tick_median", "tick_ms_median", "verify_ms_median", "memory_bytes"] {
+            assert!(m["summary"][key].is_number(), "summary.{key}");
+        }
+    }
+    // A bouncing bunny touches only some paths: naive traces fewer photon rays than off.
+    let rays = |i: usize| modes[i]["summary"]["rays_per_tick_median"].as_f64().unwrap();
+    assert!(rays(1) < rays(0), "naive {} vs off {}", rays(1), rays(0));
+}

@@ -1,0 +1,211 @@
+//! `relume bench reuse`: photon path reuse modes over the same animation, in one process, with
+//! the same seed, as in Moreau et al.'s Figures 7 and 8.
+//!
+//! Each mode runs a fresh session over F frames of the animation at `--fps`. Frame 0 builds
+//! every path (reported apart as `initial`); frames 1.. are summarised by median and p95.
+//! `rays_traced` counts rays traced for photon paths (verification and retracing); camera and
+//! shadow rays are the same in every mode and reported apart.
+use super::render::load_scene;
+use super::{SceneArgs, UsageError};
+use crate::embree::Device;
+use crate::engine::{thread_pool, Session};
+use crate::scene::animation::Animation;
+use crate::technique::photon_reuse::{PhotonReuseConfig, ReuseMode};
+use crate::technique::{TechniqueConfig, TechniqueStats};
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct ReuseArgs {
+    #[command(flatten)]
+    pub target: SceneArgs,
+    /// Animation to play (NAME.anim.json).
+    #[arg(long)]
+    pub anim: PathBuf,
+    #[arg(long, default_value_t = 60)]
+    pub frames: u32,
+    /// Animation frames per second (time step between frames).
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
+    /// Photon paths.
+    #[arg(long, default_value_t = 1_000_000)]
+    pub paths: u32,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Also write the report as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct FrameFigures {
+    pub rays_traced: u64,
+    pub paths_retraced: u64,
+    pub tick_ms: f64,
+    pub stages_ms: BTreeMap<&'static str, f64>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct Summary {
+    pub rays_per_tick_median: f64,
+    pub rays_per_tick_p95: f64,
+    pub tick_ms_median: f64,
+    pub tick_ms_p95: f64,
+    pub verify_ms_median: f64,
+    pub trace_plus_verify_ms_median: f64,
+    pub memory_bytes: u64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ModeReport {
+    pub mode: String,
+    pub initial: FrameFigures,
+    pub frames: Vec<FrameFigures>,
+    pub summary: Summary,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ReuseReport {
+    pub scene: String,
+    pub animation: String,
+    pub paths: u32,
+    pub width: u32,
+    pub height: u32,
+    pub threads: usize,
+    pub modes: Vec<ModeReport>,
+}
+
+fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        return 0.0;
+    }
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
+    if args.frames < 2 || !(args.fps > 0.0 && args.fps.is_finite()) {
+        return Err(UsageError("--frames must be at least 2 and --fps positive".into()).into());
+    }
+    let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
+    let anim = Animation::load(&args.anim).map_err(|e| UsageError(format!("{}: {e}", args.anim.display())))?;
+    anim.validate(&scene).map_err(|e| UsageError(format!("{}: {e}", args.anim.display())))?;
+    let threads = args.target.threads();
+    let pool = thread_pool(threads)?;
+    let device = Device::new(threads).context("creating the Embree device")?;
+    let modes = [ReuseMode::Off, ReuseMode::Naive];
+    let bar = ProgressBar::new(modes.len() as u64 * args.frames as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{msg:12} [{bar:30}] {pos}/{len} frames ({eta} left)")?.progress_chars("=> "),
+    );
+    let mut reports = Vec::new();
+    for mode in modes {
+        let name = serde_json::to_value(mode)?.as_str().unwrap_or("?").to_string();
+        bar.set_message(name.clone());
+        let config = TechniqueConfig::PhotonReuse(PhotonReuseConfig {
+            paths: args.paths,
+            reuse: mode,
+            ..PhotonReuseConfig::default()
+        });
+        let mut session = Session::new(scene.clone(), &config, args.seed, &device)?;
+        let mut figures = Vec::new();
+        let mut memory = 0;
+        pool.install(|| -> Result<()> {
+            for i in 0..args.frames {
+                session.queue_edits(anim.edits_at(i as f32 / args.fps))?;
+                let frame = session.tick()?;
+                let TechniqueStats::PhotonReuse(s) = &frame.stats.detail else {
+                    anyhow::bail!("photon_reuse stats expected");
+                };
+                memory = s.memory.total() + s.grid_bytes;
+                let t = &frame.stats.times;
+                let stages = BTreeMap::from([
+                    ("apply_and_commit", t.apply_ms + t.commit_ms),
+                    ("verify", s.verify_ms),
+                    ("trace", s.trace_ms),
+                    ("grid", s.grid_ms),
+                    ("render", s.render_ms),
+                ]);
+                figures.push(FrameFigures {
+                    rays_traced: s.retrace_rays,
+                    paths_retraced: s.partly_retraced + s.fully_retraced,
+                    tick_ms: t.total_ms,
+                    stages_ms: stages,
+                });
+                bar.inc(1);
+            }
+            Ok(())
+        })?;
+        let initial = figures.remove(0);
+        let col = |f: &dyn Fn(&FrameFigures) -> f64| figures.iter().map(f).collect::<Vec<f64>>();
+        let rays = col(&|f| f.rays_traced as f64);
+        let ticks = col(&|f| f.tick_ms);
+        let summary = Summary {
+            rays_per_tick_median: quantile(&rays, 0.5),
+            rays_per_tick_p95: quantile(&rays, 0.95),
+            tick_ms_median: quantile(&ticks, 0.5),
+            tick_ms_p95: quantile(&ticks, 0.95),
+            verify_ms_median: quantile(&col(&|f| f.stages_ms["verify"]), 0.5),
+            trace_plus_verify_ms_median: quantile(&col(&|f| f.stages_ms["verify"] + f.stages_ms["trace"]), 0.5),
+            memory_bytes: memory,
+        };
+        reports.push(ModeReport { mode: name, initial, frames: figures, summary });
+    }
+    bar.finish_and_clear();
+    Ok(ReuseReport {
+        scene: args.target.scene.display().to_string(),
+        animation: args.anim.display().to_string(),
+        paths: args.paths,
+        width: scene.camera.width,
+        height: scene.camera.height,
+        threads,
+        modes: reports,
+    })
+}
+
+pub fn print_table(r: &ReuseReport) {
+    println!(
+        "relume bench reuse: {} with {} at {}x{}, {} paths, {} threads",
+        r.scene, r.animation, r.width, r.height, r.paths, r.threads
+    );
+    println!("  mode    rays/tick (median, p95)   tick ms (median, p95)   verify ms   trace+verify ms   memory MiB");
+    for m in &r.modes {
+        let s = &m.summary;
+        println!(
+            "  {:<7} {:>10.0} {:>12.0} {:>12.1} {:>10.1} {:>11.2} {:>15.1} {:>12.1}",
+            m.mode,
+            s.rays_per_tick_median,
+            s.rays_per_tick_p95,
+            s.tick_ms_median,
+            s.tick_ms_p95,
+            s.verify_ms_median,
+            s.trace_plus_verify_ms_median,
+            s.memory_bytes as f64 / 1048576.0
+        );
+    }
+    if let (Some(off), Some(naive)) =
+        (r.modes.iter().find(|m| m.mode == "off"), r.modes.iter().find(|m| m.mode == "naive"))
+    {
+        let (o, n) = (&off.summary, &naive.summary);
+        println!(
+            "  naive vs off: {:.1}x fewer rays per tick, {:.1}x less trace+verify time, verification {:.1}% of the off tick",
+            o.rays_per_tick_median / n.rays_per_tick_median.max(1.0),
+            o.trace_plus_verify_ms_median / n.trace_plus_verify_ms_median.max(1e-9),
+            100.0 * n.verify_ms_median / o.tick_ms_median.max(1e-9)
+        );
+    }
+}
+
+pub fn run(args: ReuseArgs) -> Result<()> {
+    let report = measure(&args)?;
+    print_table(&report);
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
