@@ -135,7 +135,6 @@ fn regeneration_keeps_lanes_busier() {
 fn progressive_accumulation_resets_on_change() {
     use relume::embree::Device;
     use relume::engine::Session;
-    use relume::scene::edits::Edit;
     let device = Device::new(1).unwrap();
     let mut scene = load("cornell-box.json");
     scene.set_resolution(16, 16);
@@ -144,13 +143,7 @@ fn progressive_accumulation_resets_on_change() {
     let f2 = s.tick().unwrap();
     assert_eq!(f1.accumulation_id, f2.accumulation_id);
     assert_eq!((f1.spp, f2.spp), (1, 2));
-    s.queue_edits(vec![Edit::Camera {
-        position: Some([278.0, 273.0, -700.0]),
-        look_at: None,
-        up: None,
-        vfov_deg: None,
-    }])
-    .unwrap();
+    s.queue_edits(vec![camera_dolly()]).unwrap();
     let f3 = s.tick().unwrap();
     assert_ne!(f3.accumulation_id, f2.accumulation_id);
     assert_eq!(f3.spp, 1);

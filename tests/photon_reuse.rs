@@ -96,13 +96,7 @@ fn a_static_scene_retraces_nothing_after_the_first_tick_and_accumulates() {
     }
     assert_eq!(s.film().passes, 4);
     // A camera edit restarts the film but retraces no path: photons do not depend on the view.
-    s.queue_edits(vec![Edit::Camera {
-        position: Some([278.0, 273.0, -700.0]),
-        look_at: None,
-        up: None,
-        vfov_deg: None,
-    }])
-    .unwrap();
+    s.queue_edits(vec![camera_dolly()]).unwrap();
     let f = s.tick().unwrap();
     assert_eq!(stats(&f).untouched, 20_000);
     assert_ne!(f.accumulation_id, first.accumulation_id);

@@ -43,6 +43,15 @@ pub fn emitter_mesh(emitter: &EmitterDesc) -> Option<Mesh> {
     }
 }
 
+/// A point uniformly distributed by area over an area light's triangles, with its unit normal.
+/// `by_area` must not be empty.
+fn sample_area_point(triangles: &[[Vec3; 3]], by_area: &DiscreteDistribution, u: Vec2) -> (Vec3, Vec3) {
+    let (i, _, u0) = by_area.sample(u.x);
+    let [a, b, c] = triangles[i];
+    let bary = sampling::uniform_triangle(Vec2::new(u0, u.y));
+    (a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y, (b - a).cross(c - a).normalize())
+}
+
 /// Smoothstep from `lo` to `hi`, as pbrt-v4's spot falloff uses.
 fn smoothstep(x: f32, lo: f32, hi: f32) -> f32 {
     if lo == hi {
@@ -131,11 +140,7 @@ impl LightGeometry {
                 if by_area.is_empty() {
                     return None;
                 }
-                let (i, _, u0) = by_area.sample(u.x);
-                let [a, b, c] = triangles[i];
-                let bary = sampling::uniform_triangle(Vec2::new(u0, u.y));
-                let q = a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y;
-                let n = (b - a).cross(c - a).normalize();
+                let (q, n) = sample_area_point(triangles, by_area, u);
                 let d = q - p;
                 let dist2 = d.length_squared();
                 let dist = dist2.sqrt();
@@ -192,11 +197,7 @@ impl LightGeometry {
                 if by_area.is_empty() {
                     return None;
                 }
-                let (i, _, u0) = by_area.sample(u_pos.x);
-                let [a, b, c] = triangles[i];
-                let bary = sampling::uniform_triangle(Vec2::new(u0, u_pos.y));
-                let on_light = a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y;
-                let n = (b - a).cross(c - a).normalize();
+                let (on_light, n) = sample_area_point(triangles, by_area, u_pos);
                 let dir = crate::core::ShadingFrame::from_normal(n).to_world(sampling::cosine_hemisphere(u_dir));
                 // Off the light's surface, so the ray cannot hit its own light.
                 let origin = crate::core::offset_ray_origin(on_light, n);

@@ -271,9 +271,5 @@ pub fn print_table(r: &RaysReport) {
 pub fn rays(args: RaysArgs) -> Result<()> {
     let report = measure(&args)?;
     print_table(&report);
-    if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&report)?)
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(())
+    super::write_json_report(args.json.as_deref(), &report)
 }

@@ -203,9 +203,5 @@ pub fn print_table(r: &ReuseReport) {
 pub fn run(args: ReuseArgs) -> Result<()> {
     let report = measure(&args)?;
     print_table(&report);
-    if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&report)?)
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
-    Ok(())
+    super::write_json_report(args.json.as_deref(), &report)
 }

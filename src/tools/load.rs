@@ -378,10 +378,7 @@ pub fn run(args: LoadArgs) -> Result<()> {
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     let report = runtime.block_on(run_load(&args))?;
     print_table(&report);
-    if let Some(path) = &args.json {
-        std::fs::write(path, serde_json::to_string_pretty(&report)?)
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
+    super::write_json_report(args.json.as_deref(), &report)?;
     if report.errors > 0 || report.lost_edits != 0 {
         return Err(anyhow::anyhow!("{} errors, {} edits lost", report.errors, report.lost_edits));
     }

@@ -30,6 +30,16 @@ impl SceneArgs {
     }
 }
 
+/// Writes a report as pretty JSON when the command was given `--json FILE`.
+pub fn write_json_report<T: serde::Serialize>(path: Option<&Path>, report: &T) -> anyhow::Result<()> {
+    use anyhow::Context;
+    if let Some(path) = path {
+        std::fs::write(path, serde_json::to_string_pretty(report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
 /// The requested thread count, or one per core.
 pub fn threads_or_all_cores(requested: Option<usize>) -> usize {
     requested.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()))

@@ -36,6 +36,16 @@ pub fn path(spp: u32) -> PathConfig {
     PathConfig { spp, ..PathConfig::default() }
 }
 
+/// An edit that moves the Cornell box's camera 100 units closer.
+pub fn camera_dolly() -> relume::scene::edits::Edit {
+    relume::scene::edits::Edit::Camera {
+        position: Some([278.0, 273.0, -700.0]),
+        look_at: None,
+        up: None,
+        vfov_deg: None,
+    }
+}
+
 /// Mean and standard error of the mean over independent batch estimates.
 pub fn mean_and_standard_error(xs: &[f64]) -> (f64, f64) {
     let n = xs.len() as f64;

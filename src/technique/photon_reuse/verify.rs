@@ -21,17 +21,27 @@ pub struct Changes {
     pub material_changed: Vec<bool>,
 }
 
-/// Does the segment `origin + t·dir`, t ∈ [0, t_max], touch the box? (Slab test.)
+/// Does the segment `origin + t·dir`, t ∈ [0, t_max], touch the box? (Slab test; touching a
+/// face counts, which keeps the test conservative.)
 pub fn segment_hits_box(origin: Vec3, dir: Vec3, t_max: f32, b: &Aabb) -> bool {
-    let inv = dir.recip();
-    let t0 = (b.min - origin) * inv;
-    let t1 = (b.max - origin) * inv;
-    // NaN from 0·∞ (a ray in a slab's plane) must not reject: treat it as inside that slab.
-    let lo = t0.min(t1);
-    let hi = t0.max(t1);
-    let near = [lo.x, lo.y, lo.z, 0.0].into_iter().filter(|v| !v.is_nan()).fold(f32::NEG_INFINITY, f32::max);
-    let far = [hi.x, hi.y, hi.z, t_max].into_iter().filter(|v| !v.is_nan()).fold(f32::INFINITY, f32::min);
-    near <= far
+    let (mut near, mut far) = (0.0f32, t_max);
+    for axis in 0..3 {
+        let (o, d, lo, hi) = (origin[axis], dir[axis], b.min[axis], b.max[axis]);
+        if d == 0.0 {
+            // Parallel to this slab: inside it or never.
+            if o < lo || o > hi {
+                return false;
+            }
+            continue;
+        }
+        let (t0, t1) = ((lo - o) / d, (hi - o) / d);
+        near = near.max(t0.min(t1));
+        far = far.min(t0.max(t1));
+        if near > far {
+            return false;
+        }
+    }
+    true
 }
 
 /// The retrace a path needs, or `None` if it is still valid. Also returns the box tests made.
