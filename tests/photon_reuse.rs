@@ -161,3 +161,19 @@ fn bad_configurations_are_rejected_naming_the_field() {
     let parsed: Result<TechniqueConfig, _> = serde_json::from_str(r#"{"id": "photon_reuse", "reuse": "sometimes"}"#);
     assert!(parsed.is_err());
 }
+
+#[test]
+fn only_what_the_scene_uses_is_allocated() {
+    // Property: the store models only what the scene needs. With only point lights (the
+    // furnace) no emission origins are stored; an area light (the Cornell box) needs them.
+    let memory = |name: &str| {
+        let mut scene = load(name);
+        scene.set_resolution(8, 8);
+        stats(&render(scene, TechniqueConfig::PhotonReuse(config(1000, ReuseMode::Naive)), 1, 1, 1)).memory
+    };
+    let point = memory("furnace.json");
+    let area = memory("cornell-box.json");
+    assert_eq!(point.origins, 0);
+    assert_eq!(area.origins, 1000 * 12);
+    assert_eq!(point.photon_map, area.photon_map);
+}
