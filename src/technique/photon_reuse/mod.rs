@@ -10,7 +10,7 @@
 //!    roulette, on a light, or leaving the scene. Store them bounce-major (`store.rs`, §4).
 //! 2. Later ticks, `reuse: "naive"` (§3.2): paths of a light that moved or changed are emitted
 //!    anew. Every other path is tested segment by segment, from the light, against the old and new
-//!    world bounds of every moved surface; the first segment that may be crossed, or that ends on
+//!    world bounds of every moved surface (through a small BVH over those boxes); the first segment that may be crossed, or that ends on
 //!    a moved object, is re-intersected along its stored direction and everything after it is
 //!    traced afresh (`verify.rs`). Photons on an object whose material changed keep their
 //!    arrival flux; what they reflected is retraced. `reuse: "off"` is the baseline: every path
@@ -58,7 +58,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 use trace::{Retrace, TracedTail};
-use verify::Changes;
+use verify::{BoxTree, Changes};
 
 /// How paths are reused from tick to tick.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -224,18 +224,17 @@ impl PhotonReuse {
         if self.config.reuse == ReuseMode::Off {
             return (0..store.paths).map(|i| (i, Retrace::Emit)).collect();
         }
-        let mut changes = Changes {
-            boxes: Vec::new(),
-            moved: vec![false; scene.objects.len()],
-            material_changed: vec![false; scene.objects.len()],
-        };
+        let mut boxes = Vec::new();
+        let mut moved = vec![false; scene.objects.len()];
         for m in &delta.moved {
-            changes.boxes.push(m.old_bounds);
-            changes.boxes.push(m.new_bounds);
+            boxes.push(m.old_bounds);
+            boxes.push(m.new_bounds);
             if let SurfaceId::Object(o) = m.surface {
-                changes.moved[o as usize] = true;
+                moved[o as usize] = true;
             }
         }
+        let mut changes =
+            Changes { boxes: BoxTree::new(boxes), moved, material_changed: vec![false; scene.objects.len()] };
         for (o, object) in scene.objects.iter().enumerate() {
             changes.material_changed[o] = delta.materials.contains(&(object.material as usize));
         }
