@@ -127,6 +127,9 @@ fn missing_files_are_rejected() {
 fn paths_escaping_the_scenes_root_are_rejected() {
     let r = load_with("escape", |v| v["objects"][0]["shape"]["path"] = "../../../../../../etc/hostname".into());
     expect_error(r, "objects[0].shape.path", "escapes the scenes root");
+    // A target that does not exist is still named as escaping, whatever the checkout's depth.
+    let r = load_with("escape-missing", |v| v["objects"][0]["shape"]["path"] = "../no-such-dir/x.obj".into());
+    expect_error(r, "objects[0].shape.path", "escapes the scenes root");
     let r = load_with("absolute", |v| v["objects"][0]["shape"]["path"] = "/etc/hostname".into());
     expect_error(r, "objects[0].shape.path", "absolute");
 }

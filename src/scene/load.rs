@@ -153,20 +153,45 @@ fn check_segments(field: &str, s: u32) -> Result<(), SceneError> {
 }
 
 /// Resolves a mesh path against the scene's folder and refuses anything outside `root`.
+///
+/// The check runs twice: lexically first, so a path that climbs out of the root is named as
+/// such whether or not its target exists, then on the canonical path, so a symlink inside the
+/// root cannot point outside it.
 pub fn resolve_mesh_path(field: &str, path: &str, scene_dir: &Path, root: &Path) -> Result<PathBuf, SceneError> {
     if Path::new(path).is_absolute() {
         return Err(invalid(field, format!("'{path}' is absolute; mesh paths are relative to the scene file")));
+    }
+    let root =
+        root.canonicalize().map_err(|e| SceneError::Io { path: root.display().to_string(), message: e.to_string() })?;
+    let escapes = || invalid(field, format!("'{path}' escapes the scenes root {}", root.display()));
+    let scene_dir = scene_dir.canonicalize().unwrap_or_else(|_| scene_dir.to_path_buf());
+    if !lexically_normal(&scene_dir.join(path)).starts_with(&root) {
+        return Err(escapes());
     }
     let joined = scene_dir.join(path);
     let canonical = joined
         .canonicalize()
         .map_err(|e| invalid(field, format!("mesh file '{}' not found: {e}", joined.display())))?;
-    let root =
-        root.canonicalize().map_err(|e| SceneError::Io { path: root.display().to_string(), message: e.to_string() })?;
     if !canonical.starts_with(&root) {
-        return Err(invalid(field, format!("'{path}' escapes the scenes root {}", root.display())));
+        return Err(escapes());
     }
     Ok(canonical)
+}
+
+/// Removes `.` and resolves `..` against the preceding component, without touching the disk.
+fn lexically_normal(path: &Path) -> PathBuf {
+    use std::path::Component;
+    let mut out = PathBuf::new();
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir => {
+                out.pop();
+            }
+            other => out.push(other),
+        }
+    }
+    out
 }
 
 /// A name must be non-empty and unique among its kind.
