@@ -76,14 +76,27 @@ pub struct MovedSurface {
 pub struct SceneDelta {
     /// Objects and light shapes that moved (Embree instances to update).
     pub moved: Vec<MovedSurface>,
-    /// Lights whose transform or emission changed, by index.
-    pub lights: Vec<usize>,
+    /// Lights whose transform or emission changed.
+    pub lights: Vec<LightChange>,
     /// Materials whose parameters changed, by index.
     pub materials: Vec<usize>,
+    /// What each of `materials` was before this tick, in the same order.
+    pub previous_materials: Vec<Material>,
     pub camera: bool,
     /// Edits received this tick, and how many of them a later edit to the same target replaced.
     pub received: usize,
     pub coalesced: usize,
+}
+
+/// How one light changed this tick.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LightChange {
+    pub light: usize,
+    /// Its placement before this tick.
+    pub old_world_from_object: Affine3A,
+    pub moved: bool,
+    /// Its emitter's parameters changed (power, cone, shape).
+    pub emission_changed: bool,
 }
 
 impl SceneDelta {
@@ -250,7 +263,12 @@ pub fn apply(scene: &mut Scene, edits: Vec<Edit>) -> Result<SceneDelta, SceneErr
                         new_bounds: light_bounds(scene, idx),
                     });
                 }
-                delta.lights.push(idx);
+                delta.lights.push(LightChange {
+                    light: idx,
+                    old_world_from_object: old.transform.world_from_object(),
+                    moved: trs != old.transform,
+                    emission_changed: scene.desc().lights[idx].emitter != old.emitter,
+                });
             }
             e @ Edit::Camera { .. } => {
                 let cam = merged_camera(scene.desc().camera.clone(), &e);
@@ -259,6 +277,7 @@ pub fn apply(scene: &mut Scene, edits: Vec<Edit>) -> Result<SceneDelta, SceneErr
             }
             Edit::Material { name, material } => {
                 let idx = scene.material_names.iter().position(|n| *n == name).unwrap_or_default();
+                delta.previous_materials.push(scene.materials[idx].clone());
                 scene.set_material(idx, material);
                 delta.materials.push(idx);
             }

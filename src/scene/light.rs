@@ -181,29 +181,37 @@ impl LightGeometry {
     /// the point on an area light, `u_dir` the direction (uniform sphere for point lights,
     /// uniform cone for spots, cosine-weighted for area lights).
     pub fn sample_emission(&self, u_pos: Vec2, u_dir: Vec2) -> Option<(Vec3, Vec3, Rgb)> {
-        match self {
-            LightGeometry::Point { position, intensity } => {
-                let dir = sampling::uniform_sphere(u_dir);
-                Some((*position, dir, *intensity / sampling::UNIFORM_SPHERE_PDF))
-            }
-            LightGeometry::Spot { position, axis, intensity, cos_falloff_start, cos_falloff_end } => {
+        let (origin, dir) = match self {
+            LightGeometry::Point { position, .. } => (*position, sampling::uniform_sphere(u_dir)),
+            LightGeometry::Spot { position, axis, cos_falloff_end, .. } => {
                 let local = sampling::uniform_cone(u_dir, *cos_falloff_end);
-                let dir = crate::core::ShadingFrame::from_normal(*axis).to_world(local);
-                let falloff = smoothstep(local.z, *cos_falloff_end, *cos_falloff_start);
-                (falloff > 0.0)
-                    .then(|| (*position, dir, *intensity * (falloff / sampling::uniform_cone_pdf(*cos_falloff_end))))
+                (*position, crate::core::ShadingFrame::from_normal(*axis).to_world(local))
             }
-            LightGeometry::Area { radiance, triangles, area, by_area } => {
+            LightGeometry::Area { triangles, by_area, .. } => {
                 if by_area.is_empty() {
                     return None;
                 }
                 let (on_light, n) = sample_area_point(triangles, by_area, u_pos);
                 let dir = crate::core::ShadingFrame::from_normal(n).to_world(sampling::cosine_hemisphere(u_dir));
                 // Off the light's surface, so the ray cannot hit its own light.
-                let origin = crate::core::offset_ray_origin(on_light, n);
-                // L cosθ / (pdf_A · pdf_ω) = L cosθ / ((1/A) · cosθ/π) = L π A.
-                Some((origin, dir, *radiance * (PI * area)))
+                (crate::core::offset_ray_origin(on_light, n), dir)
             }
+        };
+        let weight = self.emission_weight(dir);
+        (!weight.is_black()).then_some((origin, dir, weight))
+    }
+
+    /// `flux / pdf` of a ray [`LightGeometry::sample_emission`] emits along `dir`: uniform
+    /// sphere `I·4π` for points; `I·falloff / pdf_cone` for spots; `L cosθ / (pdf_A · pdf_ω) =
+    /// L cosθ / ((1/A) · cosθ/π) = L π A` for area lights (`dir` on the emitting side).
+    pub fn emission_weight(&self, dir: Vec3) -> Rgb {
+        match self {
+            LightGeometry::Point { intensity, .. } => *intensity / sampling::UNIFORM_SPHERE_PDF,
+            LightGeometry::Spot { axis, intensity, cos_falloff_start, cos_falloff_end, .. } => {
+                let falloff = smoothstep(axis.dot(dir), *cos_falloff_end, *cos_falloff_start);
+                *intensity * (falloff / sampling::uniform_cone_pdf(*cos_falloff_end))
+            }
+            LightGeometry::Area { radiance, area, .. } => *radiance * (PI * area),
         }
     }
 

@@ -4,28 +4,38 @@
 //! Paper: P. Moreau, M. Doggett, E. Sintorn, "Path Verification for Dynamic Indirect
 //! Illumination" (`shared/papers/path-verification-dynamic-indirect-illumination.md`).
 //!
-//! # Algorithm (per tick)
+//! # Algorithm (per tick; Figure 3's five steps, then the photon map)
 //! 1. First tick: assign paths to lights in proportion to their power (stratified), and trace
 //!    every path from its light (`trace.rs`): photons at every hit, up to B, ending by Russian
 //!    roulette, on a light, or leaving the scene. Store them bounce-major (`store.rs`, §4).
-//! 2. Later ticks, `reuse: "naive"` (§3.2): paths of a light that moved or changed are emitted
-//!    anew. Every other path is tested segment by segment, from the light, against the old and new
-//!    world bounds of every moved surface (through a small BVH over those boxes); the first segment that may be crossed, or that ends on
-//!    a moved object, is re-intersected along its stored direction and everything after it is
-//!    traced afresh (`verify.rs`). Photons on an object whose material changed keep their
-//!    arrival flux; what they reflected is retraced. `reuse: "off"` is the baseline: every path
-//!    is retraced whenever the scene changed.
-//! 3. Rebuild the photon grid if any path changed, with the radius fixed at the first tick.
-//! 4. Render (`gather.rs`): camera rays through specular chains to the first diffuse hit; direct
-//!    light by next-event estimation, indirect light by a density estimate over photons from the
-//!    second bounce on. The film accumulates while nothing changes.
+//! 2. **Update path origins + DM_C** for lights that moved (`lights.rs`, §3.1): a light's
+//!    distribution map (`distribution.rs`) is made the first time it moves; kept paths get the
+//!    new origin, their new primary segment is checked against the full scene with an occlusion
+//!    ray, and invalid ones free their slot. A light whose emission changed re-emits its paths.
+//! 3. **Dynamic occlusions** (§3.2–3.3): every other path is tested segment by segment from the
+//!    light against the old and new world bounds of every moved surface (a small BVH over the
+//!    boxes, `verify.rs`) and against edited materials. `naive`: the first segment that may be
+//!    crossed, or that ends on a moved object, is re-intersected and everything after it is
+//!    traced afresh. `error` (`error.rs`, Algorithm 1): crossed segments are re-traced and the
+//!    path is kept while the energy reflected at each new vertex stays within T of the stored.
+//! 4. **Prune and fill** (`lights.rs`, eq. 1) for lights that moved or whose map has not yet
+//!    settled, then trace fills and retraces in parallel.
+//! 5. Rebuild the photon grid if any photon changed, with the radius fixed at the first tick,
+//!    and render (`gather.rs`): camera rays through specular chains to the first diffuse hit;
+//!    direct light by next-event estimation, indirect light by a density estimate over photons
+//!    from the second bounce on. The film accumulates while nothing changes.
+//!
+//! `reuse: "off"` is the baseline: every path is emitted anew whenever the scene changed, and
+//! no distribution map is kept.
 //!
 //! # Parameters (defaults)
 //! | field | default | meaning |
 //! |---|---|---|
 //! | `paths` | 1 000 000 | N, resident photon paths |
 //! | `max_photons` | 7 | B, photons per path (at most 15, the path word's limit) |
-//! | `reuse` | `naive` | `off` (retrace all on change) or `naive` (verify, retrace from the first invalid segment) |
+//! | `reuse` | `error` | `off`, `naive` or `error` |
+//! | `threshold` | 0.001 | T of `error` mode (the paper's 0.1 %) |
+//! | `distribution_map` | `{"position": [8, 8], "direction": [64, 64]}` | cells (u, v) on area lights × (θ, φ) |
 //! | `gather_photons` | 64 | k: the radius is chosen so a disc of it holds k photons on average: r = √(k·A / (π·M)), A the diffuse area, M the photons gathered |
 //! | `radius` | none | overrides r (meters) |
 //! | `spp` | 1 | camera samples per pixel per tick |
@@ -33,20 +43,32 @@
 //! # Bias and consistency
 //! Direct light is unbiased. Indirect light is a photon density estimate: biased by the kernel
 //! (blur of width r, light bleeding near corners), consistent as N → ∞ and r → 0. Russian
-//! roulette and B truncate paths: B = 7 loses the energy beyond seven bounces. Reuse does not
-//! add bias: a kept prefix is a valid sample, a re-intersected segment keeps a direction that
-//! was sampled independently of what it hits, and every retraced tail is a fresh sample.
+//! roulette and B truncate paths: B = 7 loses the energy beyond seven bounces. `naive` reuse
+//! adds no bias: a kept prefix is a valid sample, a re-intersected segment keeps a direction
+//! sampled independently of what it hits, and every retraced tail is a fresh sample. `error`
+//! reuse keeps energies that are off by up to T per kept vertex (the paper's trade). Every path
+//! carries 1/N_light of its light's power, which is exact only while DM_C = DM_T: after a light
+//! moves, the cells pruned or filled over the next ticks are briefly over- or under-weighted.
 //!
 //! # Failure modes
-//! Small bright lights seen only indirectly give blotchy indirect light at low N; a moving light
-//! retraces all its paths until distribution maps land (`error` mode and the distribution maps
-//! of §3.1 are not built yet); large moving objects near the light invalidate most paths.
+//! Small bright lights seen only indirectly give blotchy indirect light at low N; large moving
+//! objects near the light invalidate most paths; an area-light cell whose sliver of the shape
+//! is tiny may fall back to sampling the whole light; a light that moves every tick never lets
+//! its map settle (the prune and fill then run every tick, as in the paper).
+mod config;
+mod distribution;
+mod error;
 mod gather;
+mod lights;
+mod stats;
 mod store;
 mod trace;
 mod verify;
 
+pub use config::{PhotonReuseConfig, ReuseMode, MAX_PATHS};
+pub use distribution::{DistributionMap, MapResolution, MAX_CELLS};
 pub use gather::PhotonGrid;
+pub use stats::PhotonStats;
 pub use store::{PathStore, PathWord, StoreMemory};
 pub use verify::segment_hits_box;
 
@@ -54,95 +76,23 @@ use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, Te
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
 use crate::scene::{Scene, SurfaceId};
+use distribution::EmissionFrame;
+use glam::Affine3A;
+use lights::{MappedLight, Moved};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use std::time::Instant;
-use trace::{Retrace, TracedTail};
+use trace::{Retrace, TracedTail, Tracer};
 use verify::{BoxTree, Changes};
 
-/// How paths are reused from tick to tick.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ReuseMode {
-    /// Baseline: retrace every path whenever the scene changed.
-    Off,
-    /// Retrace from the first segment a moved surface's bounds may cross (§3.2).
-    Naive,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct PhotonReuseConfig {
-    pub paths: u32,
-    pub max_photons: u32,
-    pub reuse: ReuseMode,
-    pub gather_photons: u32,
-    pub radius: Option<f32>,
-    pub spp: u32,
-}
-
-impl Default for PhotonReuseConfig {
-    fn default() -> PhotonReuseConfig {
-        PhotonReuseConfig {
-            paths: 1_000_000,
-            max_photons: 7,
-            reuse: ReuseMode::Naive,
-            gather_photons: 64,
-            radius: None,
-            spp: 1,
-        }
-    }
-}
-
-/// Largest accepted path count.
-pub const MAX_PATHS: u32 = 16_000_000;
-
-impl PhotonReuseConfig {
-    pub fn validate(&self) -> Result<(), TechniqueError> {
-        let bad = |field: &str, message: String| Err(TechniqueError::InvalidConfig { field: field.into(), message });
-        if self.paths == 0 || self.paths > MAX_PATHS {
-            return bad("paths", format!("must lie in 1..={MAX_PATHS}"));
-        }
-        if self.max_photons == 0 || self.max_photons > PathWord::MAX_PHOTONS {
-            return bad("max_photons", format!("must lie in 1..={}", PathWord::MAX_PHOTONS));
-        }
-        if self.gather_photons == 0 {
-            return bad("gather_photons", "must be at least 1".into());
-        }
-        if let Some(r) = self.radius {
-            if !(r.is_finite() && r > 0.0) {
-                return bad("radius", "must be a positive number of meters".into());
-            }
-        }
-        if self.spp == 0 || self.spp > super::path::MAX_SPP {
-            return bad("spp", format!("must lie in 1..={}", super::path::MAX_SPP));
-        }
-        Ok(())
-    }
-}
-
-/// Per-tick figures of `photon_reuse`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct PhotonStats {
-    pub paths: u64,
-    pub untouched: u64,
-    pub partly_retraced: u64,
-    pub fully_retraced: u64,
-    /// Rays traced for photon paths this tick (new and retraced segments).
-    pub retrace_rays: u64,
-    /// Segment-against-box tests made by verification.
-    pub verify_box_tests: u64,
-    pub camera_rays: u64,
-    pub specular_rays: u64,
-    pub shadow_rays: u64,
-    pub verify_ms: f64,
-    pub trace_ms: f64,
-    pub grid_ms: f64,
-    pub render_ms: f64,
-    pub radius: f32,
-    pub grid_photons: u64,
-    pub memory: StoreMemory,
-    pub grid_bytes: u64,
+/// Where a path stands during one tick's verification.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Standing {
+    /// Not looked at yet.
+    Unchecked,
+    /// Its light moved and the new primary segment was checked against the full scene.
+    FirstVerified,
+    /// Already invalid or scheduled; verification skips it.
+    Decided,
 }
 
 /// The `photon_reuse` technique.
@@ -150,9 +100,15 @@ pub struct PhotonReuse {
     config: PhotonReuseConfig,
     store: Option<PathStore>,
     paths_per_light: Vec<u32>,
+    /// Distribution maps of lights that have moved at least once.
+    maps: Vec<Option<MappedLight>>,
     grid: PhotonGrid,
     passes: u64,
     pending: PhotonStats,
+}
+
+fn ms(since: Instant) -> f64 {
+    since.elapsed().as_secs_f64() * 1e3
 }
 
 impl PhotonReuse {
@@ -162,6 +118,7 @@ impl PhotonReuse {
             config,
             store: None,
             paths_per_light: Vec::new(),
+            maps: Vec::new(),
             grid: PhotonGrid::default(),
             passes: 0,
             pending: PhotonStats::default(),
@@ -169,12 +126,13 @@ impl PhotonReuse {
     }
 
     /// First tick: assign paths to lights and trace them all.
-    fn build(&mut self, ctx: &RenderContext) {
+    fn build(&mut self, ctx: &RenderContext) -> PathStore {
         let scene = ctx.scene;
         let n = self.config.paths as usize;
         let with_origins = scene.lights.iter().any(|l| l.mesh.is_some());
         let mut store = PathStore::new(n, self.config.max_photons as usize, with_origins);
         self.paths_per_light = vec![0; scene.lights.len()];
+        self.maps = (0..scene.lights.len()).map(|_| None).collect();
         if let Some(select) = &scene.light_selection {
             for i in 0..n {
                 let (light, _, _) = select.sample((i as f32 + 0.5) / n as f32);
@@ -184,46 +142,186 @@ impl PhotonReuse {
         }
         let all: Vec<(usize, Retrace)> =
             if scene.light_selection.is_some() { (0..n).map(|i| (i, Retrace::Emit)).collect() } else { Vec::new() };
-        self.pending.fully_retraced = all.len() as u64;
         self.retrace(ctx, &mut store, &all);
-        self.store = Some(store);
+        store
     }
 
-    /// Traces the given retraces in parallel, in chunks that bound temporary memory.
+    /// Traces the given retraces in parallel, in chunks that bound temporary memory; fills and
+    /// the rest are timed and counted apart.
     fn retrace(&mut self, ctx: &RenderContext, store: &mut PathStore, work: &[(usize, Retrace)]) {
-        let t = Instant::now();
-        for chunk in work.chunks(1 << 16) {
-            let tails: Vec<TracedTail> = chunk
-                .par_iter()
-                .map(|&(path, how)| {
-                    let light = store.light[path] as usize;
-                    trace::trace(
-                        ctx.scene,
-                        ctx.accel,
-                        store,
-                        path,
-                        how,
-                        self.paths_per_light.get(light).copied().unwrap_or(1),
-                        ctx.seed,
-                    )
-                })
-                .collect();
-            self.pending.retrace_rays += tails.iter().map(|t| t.rays).sum::<u64>();
-            trace::write_back(store, tails);
+        let frames: Vec<Option<&EmissionFrame>> = self.maps.iter().map(|m| m.as_ref().map(|m| &m.frame)).collect();
+        let tracer = Tracer {
+            scene: ctx.scene,
+            accel: ctx.accel,
+            seed: ctx.seed,
+            paths_per_light: &self.paths_per_light,
+            frames: &frames,
+        };
+        let (fills, others): (Vec<_>, Vec<_>) = work.iter().partition(|(_, r)| matches!(r, Retrace::Fill(_)));
+        for (list, is_fill) in [(others, false), (fills, true)] {
+            let t = Instant::now();
+            let mut rays = 0;
+            for chunk in list.chunks(1 << 16) {
+                let tails: Vec<TracedTail> =
+                    chunk.par_iter().map(|&(path, how)| tracer.trace(store, path, how)).collect();
+                rays += tails.iter().map(|t| t.rays).sum::<u64>();
+                trace::write_back(store, tails);
+            }
+            if is_fill {
+                self.pending.fill_rays += rays;
+                self.pending.fill_ms += ms(t);
+            } else {
+                self.pending.retrace_rays += rays;
+                self.pending.trace_ms += ms(t);
+            }
         }
-        self.pending.trace_ms += t.elapsed().as_secs_f64() * 1e3;
+        let fully = work
+            .iter()
+            .filter(|(_, r)| matches!(r, Retrace::Emit | Retrace::Fill(_) | Retrace::KeepSegment(0)))
+            .count() as u64;
+        self.pending.fully_retraced += fully;
+        self.pending.partly_retraced += work.len() as u64 - fully;
     }
 
-    /// Which paths this tick's changes invalidate, and how to retrace them.
-    fn invalid_paths(&mut self, scene: &Scene, store: &PathStore, delta: &SceneDelta) -> Vec<(usize, Retrace)> {
-        let changed_light: Vec<bool> = (0..scene.lights.len()).map(|l| delta.lights.contains(&l)).collect();
+    /// Steps 2–4 of a later tick. Returns whether any stored photon changed.
+    fn update_paths(&mut self, ctx: &RenderContext, store: &mut PathStore, delta: &SceneDelta) -> bool {
+        let scene = ctx.scene;
+        let lights = scene.lights.len();
+        let mut reemit = vec![false; lights];
+        let mut moved_from: Vec<Option<Affine3A>> = vec![None; lights];
+        for change in &delta.lights {
+            if change.emission_changed {
+                reemit[change.light] = true;
+                self.maps[change.light] = None;
+            } else if change.moved {
+                moved_from[change.light] = Some(change.old_world_from_object);
+            }
+        }
         let transport_changed = !delta.moved.is_empty() || !delta.lights.is_empty() || !delta.materials.is_empty();
-        if !transport_changed {
-            return Vec::new();
+        let settling = self.maps.iter().flatten().any(|m| !m.map.settled());
+        if !transport_changed && !settling {
+            return false;
         }
         if self.config.reuse == ReuseMode::Off {
-            return (0..store.paths).map(|i| (i, Retrace::Emit)).collect();
+            if !transport_changed {
+                return false;
+            }
+            let all: Vec<(usize, Retrace)> = (0..store.paths).map(|i| (i, Retrace::Emit)).collect();
+            self.retrace(ctx, store, &all);
+            return true;
         }
+        let mut plan: Vec<Option<Retrace>> = vec![None; store.paths];
+        let mut standing = vec![Standing::Unchecked; store.paths];
+        let mut changed = false;
+
+        // Lights: re-emit those whose emission changed; update origins of those that moved.
+        let t = Instant::now();
+        let mut valid_of_light: Vec<Option<Vec<bool>>> = vec![None; lights];
+        for l in 0..lights {
+            if reemit[l] {
+                for i in (0..store.paths).filter(|&i| store.light[i] as usize == l) {
+                    plan[i] = Some(Retrace::Emit);
+                    standing[i] = Standing::Decided;
+                }
+                continue;
+            }
+            if let Some(old) = moved_from[l] {
+                valid_of_light[l] = self.move_light(ctx, store, l, old, &mut plan, &mut standing);
+                changed = true;
+            } else if let Some(m) = self.maps[l].as_ref().filter(|m| !m.map.settled()) {
+                valid_of_light[l] = Some(m.slots.iter().map(|&s| !store.emit_power[s as usize].is_black()).collect());
+            }
+        }
+        self.pending.origins_ms = ms(t);
+
+        // Dynamic occlusions against moved surfaces and edited materials.
+        let t = Instant::now();
+        if !delta.moved.is_empty() || !delta.materials.is_empty() {
+            changed |= self.verify(ctx, store, delta, &mut plan, &standing);
+        }
+        self.pending.verify_ms = ms(t);
+
+        // Prune and fill the maps of lights that moved or have not settled.
+        let t = Instant::now();
+        for (l, valid) in valid_of_light.into_iter().enumerate() {
+            let (Some(valid), Some(m)) = (valid, self.maps[l].as_mut()) else { continue };
+            let b = lights::balance(m, store, &valid, ctx.seed, ctx.tick, l);
+            self.pending.pruned += b.pruned;
+            self.pending.filled += b.filled;
+            for (slot, how) in b.work {
+                plan[slot] = Some(how);
+            }
+        }
+        self.pending.prune_ms = ms(t);
+
+        let work: Vec<(usize, Retrace)> = plan.into_iter().enumerate().filter_map(|(i, r)| r.map(|r| (i, r))).collect();
+        if !work.is_empty() {
+            self.retrace(ctx, store, &work);
+            changed = true;
+        }
+        changed
+    }
+
+    /// Updates the origins of light `l`'s paths after it moved from `old`, making its map the
+    /// first time. Returns which of its slots still hold a valid path.
+    fn move_light(
+        &mut self,
+        ctx: &RenderContext,
+        store: &mut PathStore,
+        l: usize,
+        old: Affine3A,
+        plan: &mut [Option<Retrace>],
+        standing: &mut [Standing],
+    ) -> Option<Vec<bool>> {
+        let frame = EmissionFrame::of(ctx.scene, l, self.config.distribution_map)?;
+        let mapped = match self.maps[l].take() {
+            Some(m) => MappedLight { frame, ..m },
+            None => {
+                let slots: Vec<u32> =
+                    (0..store.paths as u32).filter(|&i| store.light[i as usize] as usize == l).collect();
+                let map = DistributionMap::new(frame.targets(slots.len() as u32));
+                MappedLight { frame, map, slots }
+            }
+        };
+        let paths_of_light = self.paths_per_light[l];
+        let moved: Vec<(Moved, u64)> = mapped
+            .slots
+            .par_iter()
+            .map(|&s| {
+                lights::update_origin(ctx.scene, ctx.accel, store, s as usize, &mapped.frame, old, paths_of_light)
+            })
+            .collect();
+        let mut valid = Vec::with_capacity(moved.len());
+        for (&slot, (outcome, rays)) in mapped.slots.iter().zip(moved) {
+            let slot = slot as usize;
+            self.pending.origin_rays += rays;
+            match outcome {
+                Moved::Kept { origin, dir, scale, cell, retrace } => {
+                    lights::apply_moved(store, slot, origin, dir, scale, cell);
+                    valid.push(true);
+                    plan[slot] = retrace;
+                    standing[slot] = if retrace.is_some() { Standing::Decided } else { Standing::FirstVerified };
+                }
+                Moved::Invalid => {
+                    valid.push(false);
+                    standing[slot] = Standing::Decided;
+                }
+            }
+        }
+        self.maps[l] = Some(mapped);
+        Some(valid)
+    }
+
+    /// Dynamic occlusions for every path not yet decided. Returns whether a photon moved.
+    fn verify(
+        &mut self,
+        ctx: &RenderContext,
+        store: &mut PathStore,
+        delta: &SceneDelta,
+        plan: &mut [Option<Retrace>],
+        standing: &[Standing],
+    ) -> bool {
+        let scene = ctx.scene;
         let mut boxes = Vec::new();
         let mut moved = vec![false; scene.objects.len()];
         for m in &delta.moved {
@@ -233,23 +331,61 @@ impl PhotonReuse {
                 moved[o as usize] = true;
             }
         }
-        let mut changes =
-            Changes { boxes: BoxTree::new(boxes), moved, material_changed: vec![false; scene.objects.len()] };
-        for (o, object) in scene.objects.iter().enumerate() {
-            changes.material_changed[o] = delta.materials.contains(&(object.material as usize));
-        }
-        let checked: Vec<(Option<Retrace>, u64)> = (0..store.paths)
-            .into_par_iter()
-            .map(|i| {
-                if changed_light[store.light[i] as usize] {
-                    (Some(Retrace::Emit), 0)
-                } else {
-                    verify::check_path(scene, store, i, &changes)
-                }
+        let previous_material = scene
+            .objects
+            .iter()
+            .map(|o| {
+                let at = delta.materials.iter().position(|&m| m == o.material as usize)?;
+                delta.previous_materials.get(at).cloned()
             })
             .collect();
-        self.pending.verify_box_tests = checked.iter().map(|c| c.1).sum();
-        checked.into_iter().enumerate().filter_map(|(i, (r, _))| r.map(|r| (i, r))).collect()
+        let changes = Changes { boxes: BoxTree::new(boxes), moved, previous_material };
+        let todo: Vec<usize> = (0..store.paths).filter(|&i| standing[i] != Standing::Decided).collect();
+        let first_verified = |i: usize| standing[i] == Standing::FirstVerified;
+        if self.config.reuse == ReuseMode::Naive {
+            let checked: Vec<(Option<Retrace>, u64)> =
+                todo.par_iter().map(|&i| verify::check_path(scene, store, i, &changes, first_verified(i))).collect();
+            for (&i, (retrace, tests)) in todo.iter().zip(checked) {
+                self.pending.verify_box_tests += tests;
+                plan[i] = retrace;
+            }
+            return false;
+        }
+        let threshold = self.config.threshold;
+        let checked: Vec<error::Checked> = todo
+            .par_iter()
+            .map(|&i| error::check_path(scene, ctx.accel, store, i, &changes, threshold, first_verified(i)))
+            .collect();
+        let mut moved_photons = false;
+        for (&i, c) in todo.iter().zip(checked) {
+            self.pending.verify_box_tests += c.tests;
+            self.pending.verify_rays += c.rays;
+            moved_photons |= !c.moved.is_empty() || matches!(c.outcome, error::Outcome::End { .. });
+            plan[i] = error::apply(store, i, c);
+        }
+        moved_photons
+    }
+
+    /// Picks the gather radius (fixed after the first tick) and rebuilds the photon grid.
+    fn rebuild_grid(&mut self, scene: &Scene, store: &PathStore) {
+        let t = Instant::now();
+        let radius = if self.grid.radius > 0.0 { self.grid.radius } else { 1.0 };
+        let first = PhotonGrid::build(scene, store, radius);
+        let radius = match self.config.radius {
+            Some(r) => r,
+            None if self.grid.radius > 0.0 => self.grid.radius,
+            None => {
+                let area: f32 = scene
+                    .objects
+                    .iter()
+                    .filter(|o| !scene.materials[o.material as usize].is_specular())
+                    .map(|o| o.area)
+                    .sum();
+                (self.config.gather_photons as f32 * area / (std::f32::consts::PI * first.len().max(1) as f32)).sqrt()
+            }
+        };
+        self.grid = if radius == first.radius { first } else { PhotonGrid::build(scene, store, radius) };
+        self.pending.grid_ms = ms(t);
     }
 }
 
@@ -260,54 +396,33 @@ impl Technique for PhotonReuse {
 
     fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
         self.pending = PhotonStats::default();
-        let mut rebuilt = false;
-        match self.store.take() {
-            None => {
-                self.build(ctx);
-                rebuilt = true;
-            }
+        let (store, changed) = match self.store.take() {
+            None => (self.build(ctx), true),
             Some(mut store) => {
-                // Verify against what changed, then retrace what failed.
-                let t = Instant::now();
-                let work = self.invalid_paths(ctx.scene, &store, delta);
-                self.pending.verify_ms = t.elapsed().as_secs_f64() * 1e3;
-                self.pending.fully_retraced =
-                    work.iter().filter(|(_, r)| *r == Retrace::Emit || *r == Retrace::KeepSegment(0)).count() as u64;
-                self.pending.partly_retraced = work.len() as u64 - self.pending.fully_retraced;
-                if !work.is_empty() {
-                    self.retrace(ctx, &mut store, &work);
-                    rebuilt = true;
-                }
-                self.store = Some(store);
+                let changed = self.update_paths(ctx, &mut store, delta);
+                (store, changed)
             }
+        };
+        if changed {
+            self.rebuild_grid(ctx.scene, &store);
         }
-        if let Some(store) = &self.store {
-            if rebuilt {
-                let t = Instant::now();
-                let radius = if self.grid.radius > 0.0 { self.grid.radius } else { 1.0 };
-                let first = PhotonGrid::build(ctx.scene, store, radius);
-                let radius = match self.config.radius {
-                    Some(r) => r,
-                    None if self.grid.radius > 0.0 => self.grid.radius,
-                    None => {
-                        let area: f32 = ctx
-                            .scene
-                            .objects
-                            .iter()
-                            .filter(|o| !ctx.scene.materials[o.material as usize].is_specular())
-                            .map(|o| o.area)
-                            .sum();
-                        (self.config.gather_photons as f32 * area / (std::f32::consts::PI * first.len().max(1) as f32))
-                            .sqrt()
-                    }
-                };
-                self.grid = if radius == first.radius { first } else { PhotonGrid::build(ctx.scene, store, radius) };
-                self.pending.grid_ms = t.elapsed().as_secs_f64() * 1e3;
-            }
-            self.pending.paths = store.paths as u64;
-            self.pending.untouched = self.pending.paths - self.pending.partly_retraced - self.pending.fully_retraced;
-            self.pending.memory = store.memory();
+        let p = &mut self.pending;
+        p.paths = store.paths as u64;
+        p.untouched = p.paths.saturating_sub(p.partly_retraced + p.fully_retraced);
+        p.memory = store.memory();
+        p.memory.distribution_maps = self.maps.iter().flatten().map(|m| m.map.memory_bytes()).sum();
+        p.memory.light_slots = self.maps.iter().flatten().map(|m| m.slots.len() as u64 * 4).sum();
+        if let Some((chi2, cells)) = self
+            .maps
+            .iter()
+            .flatten()
+            .map(|m| (m.map.chi2(), m.map.target.len() as u64))
+            .max_by(|a, b| a.0.total_cmp(&b.0))
+        {
+            p.distribution_chi2 = chi2;
+            p.distribution_cells = cells;
         }
+        self.store = Some(store);
         if !delta.is_empty() {
             self.passes = 0;
         }

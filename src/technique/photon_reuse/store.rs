@@ -72,6 +72,10 @@ impl PathWord {
         self.0 & Self::REUSE_LIGHT_BIT != 0
     }
 
+    /// Sets the distribution-map cell (`c` below 2²²).
+    pub fn with_cell(self, c: u32) -> PathWord {
+        PathWord((self.0 & !((1 << Self::CELL_BITS) - 1)) | (c & ((1 << Self::CELL_BITS) - 1)))
+    }
     pub fn with_photons(self, n: u32) -> PathWord {
         PathWord((self.0 & !(0xF << Self::COUNT_SHIFT)) | ((n.min(Self::MAX_PHOTONS)) << Self::COUNT_SHIFT))
     }
@@ -114,11 +118,21 @@ pub struct StoreMemory {
     pub origins: u64,
     pub segment0_and_escape: u64,
     pub generations: u64,
+    /// DM_T and DM_C of lights that have moved (none for lights that never moved).
+    pub distribution_maps: u64,
+    /// Path slots of lights with a map.
+    pub light_slots: u64,
 }
 
 impl StoreMemory {
     pub fn total(&self) -> u64 {
-        self.photon_map + self.path_words + self.origins + self.segment0_and_escape + self.generations
+        self.photon_map
+            + self.path_words
+            + self.origins
+            + self.segment0_and_escape
+            + self.generations
+            + self.distribution_maps
+            + self.light_slots
     }
 }
 
@@ -146,6 +160,8 @@ impl PathStore {
             origins: self.origin.as_ref().map_or(0, |o| o.len() as u64 * 12),
             segment0_and_escape: n * (12 + 12 + 12),
             generations: n * 4,
+            distribution_maps: 0,
+            light_slots: 0,
         }
     }
 }
@@ -163,6 +179,8 @@ mod tests {
         );
         let w = w.cleared().with_photons(15);
         assert_eq!((w.cell(), w.photons(), w.replace()), (0x1234, 15, false));
+        let w = w.with_cell((1 << 22) - 1);
+        assert_eq!((w.cell(), w.photons(), w.retrace_from()), ((1 << 22) - 1, 15, 3));
         assert_eq!(PathWord(0).with_photons(99).photons(), 15);
     }
 

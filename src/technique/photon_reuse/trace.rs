@@ -5,6 +5,7 @@
 //! max(f·cos/pdf), capped at 1), at B photons, on a light (lights absorb), or by leaving the
 //! scene. Photons are stored at every surface hit, specular ones included, so that every segment
 //! is a straight line between consecutive rows.
+use super::distribution::EmissionFrame;
 use super::store::PathStore;
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::Ray;
@@ -15,7 +16,7 @@ use glam::Vec3;
 const PHOTON_STREAM: u64 = 0x5048_4f54_4f4e; // "PHOTON"
 
 /// One stored photon.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Photon {
     pub position: Vec3,
     pub incoming: Vec3,
@@ -34,6 +35,8 @@ pub enum Retrace {
     KeepSegment(u32),
     /// Sample a fresh direction at photon `k − 1` and trace a fresh tail from there.
     FreshFrom(u32),
+    /// Emit anew inside distribution-map cell `c` of the path's light (§3.1, "fill").
+    Fill(u32),
 }
 
 /// The new tail of a path, computed in parallel and written back afterwards.
@@ -46,10 +49,12 @@ pub struct TracedTail {
     pub escape: Vec3,
     /// New segment 0 (origin, direction, flux) when re-emitted.
     pub emission: Option<(Vec3, Vec3, Rgb)>,
+    /// The distribution-map cell of a re-emitted path whose light has a map.
+    pub cell: Option<u32>,
     pub rays: u64,
 }
 
-fn photon_at(store: &PathStore, path: usize, row: usize) -> Photon {
+pub fn photon_at(store: &PathStore, path: usize, row: usize) -> Photon {
     let r = &store.rows[row];
     Photon {
         position: r.position[path],
@@ -68,88 +73,119 @@ pub fn path_origin(scene: &Scene, store: &PathStore, path: usize) -> Vec3 {
     }
 }
 
-/// Traces path `path` as `how` says, reading the store and returning the new tail.
-/// `paths_of_light` is how many paths the path's light owns: each carries `1/paths_of_light` of
-/// the light's estimated power, so their sum estimates it.
-pub fn trace(
-    scene: &Scene,
-    accel: &SceneAccel,
-    store: &PathStore,
-    path: usize,
-    how: Retrace,
-    paths_of_light: u32,
-    seed: u64,
-) -> TracedTail {
-    let generation = store.generation[path].wrapping_add(1);
-    let mut rng = Rng::for_sample(seed, generation as u64, path as u64, PHOTON_STREAM);
-    let max = store.max_photons as u32;
-    let mut tail = TracedTail { path, from: 0, photons: Vec::new(), escape: Vec3::ZERO, emission: None, rays: 0 };
+/// What tracing reads besides the store: the scene, its Embree scenes, the seed, how many paths
+/// each light owns (each carries `1/paths_of_light` of its light's power, so their sum
+/// estimates it) and the emission frames of lights with a distribution map.
+pub struct Tracer<'a> {
+    pub scene: &'a Scene,
+    pub accel: &'a SceneAccel,
+    pub seed: u64,
+    pub paths_per_light: &'a [u32],
+    pub frames: &'a [Option<&'a EmissionFrame>],
+}
 
-    // Where the traced segment starts, where it goes, with what flux; and whether the vertex it
-    // leaves from needs a fresh BSDF sample first.
-    let (mut origin, mut dir, mut power, from) = match how {
-        Retrace::Emit => {
-            let light = &scene.lights[store.light[path] as usize].geometry;
-            let Some((o, d, flux_over_pdf)) = light.sample_emission(rng.next_2d(), rng.next_2d()) else {
-                tail.emission = Some((path_origin(scene, store, path), Vec3::Z, Rgb::BLACK));
-                return tail;
-            };
-            // Each path carries its light's power divided among that light's paths.
-            let power = flux_over_pdf / paths_of_light.max(1) as f32;
-            tail.emission = Some((o, d, power));
-            (o, d, power, 0)
-        }
-        Retrace::KeepSegment(0) => (path_origin(scene, store, path), store.emit_dir[path], store.emit_power[path], 0),
-        Retrace::KeepSegment(k) => {
-            let prev = photon_at(store, path, k as usize - 1);
-            let next = photon_at(store, path, k as usize);
-            let n = surface_normal(scene, &prev);
-            let side = if n.dot(next.incoming) >= 0.0 { n } else { -n };
-            (offset_ray_origin(prev.position, side), next.incoming, next.power, k)
-        }
-        Retrace::FreshFrom(k) => {
-            let prev = photon_at(store, path, k as usize - 1);
-            match scatter(scene, &prev, &mut rng) {
-                Some((o, d, p)) => (o, d, p, k),
-                None => {
-                    tail.from = k;
+impl Tracer<'_> {
+    /// A new segment 0 for `path`: anywhere on its light, or inside `cell` of its map.
+    fn emit(&self, store: &PathStore, path: usize, cell: Option<u32>, rng: &mut Rng) -> Option<(Vec3, Vec3, Rgb)> {
+        let light = store.light[path] as usize;
+        let geometry = &self.scene.lights[light].geometry;
+        let frame = self.frames.get(light).copied().flatten();
+        let in_cell = match (cell, frame) {
+            (Some(c), Some(f)) => f.sample_in_cell(c, path_origin(self.scene, store, path), rng),
+            _ => None,
+        };
+        let (origin, dir, weight) = match in_cell {
+            Some((o, d)) => (o, d, geometry.emission_weight(d)),
+            None => geometry.sample_emission(rng.next_2d(), rng.next_2d())?,
+        };
+        let paths_of_light = self.paths_per_light.get(light).copied().unwrap_or(1).max(1);
+        (!weight.is_black()).then(|| (origin, dir, weight / paths_of_light as f32))
+    }
+
+    /// Traces path `path` as `how` says, reading the store and returning the new tail.
+    pub fn trace(&self, store: &PathStore, path: usize, how: Retrace) -> TracedTail {
+        let (scene, accel) = (self.scene, self.accel);
+        let generation = store.generation[path].wrapping_add(1);
+        let mut rng = Rng::for_sample(self.seed, generation as u64, path as u64, PHOTON_STREAM);
+        let max = store.max_photons as u32;
+        let mut tail =
+            TracedTail { path, from: 0, photons: Vec::new(), escape: Vec3::ZERO, emission: None, cell: None, rays: 0 };
+
+        // Where the traced segment starts, where it goes, with what flux.
+        let (mut origin, mut dir, mut power, from) = match how {
+            Retrace::Emit | Retrace::Fill(_) => {
+                let cell = if let Retrace::Fill(c) = how { Some(c) } else { None };
+                let Some((o, d, power)) = self.emit(store, path, cell, &mut rng) else {
+                    tail.emission = Some((path_origin(scene, store, path), Vec3::Z, Rgb::BLACK));
                     return tail;
+                };
+                tail.emission = Some((o, d, power));
+                let frame = self.frames.get(store.light[path] as usize).copied().flatten();
+                tail.cell = frame.and_then(|f| f.cell_of(o, d));
+                (o, d, power, 0)
+            }
+            Retrace::KeepSegment(0) => {
+                (path_origin(scene, store, path), store.emit_dir[path], store.emit_power[path], 0)
+            }
+            Retrace::KeepSegment(k) => {
+                let prev = photon_at(store, path, k as usize - 1);
+                let next = photon_at(store, path, k as usize);
+                (leaving(scene, &prev, next.incoming), next.incoming, next.power, k)
+            }
+            Retrace::FreshFrom(k) => {
+                let prev = photon_at(store, path, k as usize - 1);
+                match scatter(scene, &prev, &mut rng) {
+                    Some((o, d, p)) => (o, d, p, k),
+                    None => {
+                        tail.from = k;
+                        return tail;
+                    }
                 }
             }
-        }
-    };
-    tail.from = from;
-
-    // Follow the path until roulette, a light, the photon limit, or the scene's end.
-    let mut row = from;
-    while row < max {
-        tail.rays += 1;
-        let Some(hit) = accel.scene().intersect1(&Ray::new(origin, dir)) else {
-            tail.escape = dir;
-            break;
         };
-        let Some((SurfaceId::Object(object), prim)) = accel.resolve(&hit) else { break };
-        let sp = scene.surface_point(SurfaceId::Object(object), prim, hit.u, hit.v);
-        let photon = Photon { position: sp.p, incoming: dir, object, prim, power };
-        tail.photons.push(photon);
-        row += 1;
-        if row >= max {
-            break;
-        }
-        match scatter(scene, &photon, &mut rng) {
-            Some((o, d, p)) => {
-                origin = o;
-                dir = d;
-                power = p;
+        tail.from = from;
+
+        // Follow the path until roulette, a light, the photon limit, or the scene's end.
+        let mut row = from;
+        while row < max {
+            tail.rays += 1;
+            let Some(hit) = accel.scene().intersect1(&Ray::new(origin, dir)) else {
+                tail.escape = dir;
+                break;
+            };
+            let Some((SurfaceId::Object(object), prim)) = accel.resolve(&hit) else { break };
+            let sp = scene.surface_point(SurfaceId::Object(object), prim, hit.u, hit.v);
+            let photon = Photon { position: sp.p, incoming: dir, object, prim, power };
+            tail.photons.push(photon);
+            row += 1;
+            if row >= max {
+                break;
             }
-            None => break,
+            match scatter(scene, &photon, &mut rng) {
+                Some((o, d, p)) => {
+                    origin = o;
+                    dir = d;
+                    power = p;
+                }
+                None => break,
+            }
         }
+        tail
     }
-    tail
+}
+
+/// A ray origin leaving photon `p` along `dir`, offset to the side `dir` leaves from.
+pub fn leaving(scene: &Scene, p: &Photon, dir: Vec3) -> Vec3 {
+    offset_towards(p.position, surface_normal(scene, p), dir)
+}
+
+/// `position` offset off its surface (normal `n`) to the side `dir` points to.
+fn offset_towards(position: Vec3, n: Vec3, dir: Vec3) -> Vec3 {
+    offset_ray_origin(position, if n.dot(dir) >= 0.0 { n } else { -n })
 }
 
 /// Unit geometric normal of the triangle a photon lies on.
-fn surface_normal(scene: &Scene, p: &Photon) -> Vec3 {
+pub fn surface_normal(scene: &Scene, p: &Photon) -> Vec3 {
     let [a, b, c] = scene.triangle(SurfaceId::Object(p.object), p.prim);
     (b - a).cross(c - a).normalize_or_zero()
 }
@@ -163,14 +199,16 @@ fn scatter(scene: &Scene, p: &Photon, rng: &mut Rng) -> Option<(Vec3, Vec3, Rgb)
     if q <= 0.0 || rng.next_f32() >= q {
         return None;
     }
-    let side = if n.dot(bs.wi) >= 0.0 { n } else { -n };
-    Some((offset_ray_origin(p.position, side), bs.wi, p.power * bs.weight / q))
+    Some((offset_towards(p.position, n, bs.wi), bs.wi, p.power * bs.weight / q))
 }
 
 /// Writes traced tails back into the store.
 pub fn write_back(store: &mut PathStore, tails: Vec<TracedTail>) {
     for t in tails {
         let i = t.path;
+        if let Some(c) = t.cell {
+            store.word[i] = store.word[i].with_cell(c);
+        }
         if let Some((o, d, p)) = t.emission {
             if let Some(origins) = &mut store.origin {
                 origins[i] = o;

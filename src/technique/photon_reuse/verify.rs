@@ -1,4 +1,5 @@
-//! Verifying stored paths against what changed this tick (naive mode, Moreau et al. §3.2).
+//! Verifying stored paths against what changed this tick (naive mode, Moreau et al. §3.2), and
+//! the box tests both modes share.
 //!
 //! Segments are tested in order from the light against the world AABBs of every surface that
 //! moved, both where it was and where it is (a slab test; conservative, so false positives only
@@ -8,7 +9,7 @@
 use super::store::PathStore;
 use super::trace::{path_origin, Retrace};
 use crate::scene::edits::Aabb;
-use crate::scene::Scene;
+use crate::scene::{Material, Scene};
 use glam::Vec3;
 
 /// A bounding-volume hierarchy over the moved boxes: a segment that misses a node's bounds
@@ -112,8 +113,8 @@ pub struct Changes {
     pub boxes: BoxTree,
     /// `moved[object]`: the object moved this tick.
     pub moved: Vec<bool>,
-    /// `material_changed[object]`: the object's material was edited this tick.
-    pub material_changed: Vec<bool>,
+    /// `previous_material[object]`: the object's material before this tick's edit, if edited.
+    pub previous_material: Vec<Option<Material>>,
 }
 
 /// Does the segment `origin + t·dir`, t ∈ [0, t_max], touch the box? (Slab test; touching a
@@ -140,7 +141,14 @@ pub fn segment_hits_box(origin: Vec3, dir: Vec3, t_max: f32, b: &Aabb) -> bool {
 }
 
 /// The retrace a path needs, or `None` if it is still valid. Also returns the box tests made.
-pub fn check_path(scene: &Scene, store: &PathStore, path: usize, changes: &Changes) -> (Option<Retrace>, u64) {
+/// `first_verified`: segment 0 was already checked against the full scene (its light moved).
+pub fn check_path(
+    scene: &Scene,
+    store: &PathStore,
+    path: usize,
+    changes: &Changes,
+    first_verified: bool,
+) -> (Option<Retrace>, u64) {
     let photons = store.word[path].photons();
     let escaped = store.escape[path] != Vec3::ZERO;
     let segments = photons + u32::from(escaped);
@@ -155,7 +163,7 @@ pub fn check_path(scene: &Scene, store: &PathStore, path: usize, changes: &Chang
             (store.escape[path], f32::INFINITY)
         };
         // A moved surface may now cross the segment (where it was, or where it is).
-        let (crossed, made) = changes.boxes.hits(start, dir, t_max);
+        let (crossed, made) = if k == 0 && first_verified { (false, 0) } else { changes.boxes.hits(start, dir, t_max) };
         tests += made;
         if crossed {
             return (
@@ -170,7 +178,7 @@ pub fn check_path(scene: &Scene, store: &PathStore, path: usize, changes: &Chang
                 return (Some(Retrace::KeepSegment(k)), tests);
             }
             // The photon's surface reflects differently now: retrace what it reflected.
-            if changes.material_changed[object] {
+            if changes.previous_material[object].is_some() {
                 return ((k + 1 < segments).then_some(Retrace::FreshFrom(k + 1)), tests);
             }
             start = store.rows[k as usize].position[path];

@@ -1,0 +1,80 @@
+//! `photon_reuse` parameters, their defaults and their validation.
+use super::distribution::MapResolution;
+use super::store::PathWord;
+use crate::technique::TechniqueError;
+use serde::{Deserialize, Serialize};
+
+/// How paths are reused from tick to tick.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ReuseMode {
+    /// Baseline: retrace every path whenever the scene changed.
+    Off,
+    /// Retrace from the first segment a moved surface's bounds may cross (§3.2).
+    Naive,
+    /// Re-trace crossed segments and keep the path while reflected energy stays within
+    /// `threshold` (§3.3, Algorithm 1).
+    Error,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct PhotonReuseConfig {
+    pub paths: u32,
+    pub max_photons: u32,
+    pub reuse: ReuseMode,
+    /// T of `error` mode: relative energy change a kept vertex may have.
+    pub threshold: f32,
+    pub distribution_map: MapResolution,
+    pub gather_photons: u32,
+    pub radius: Option<f32>,
+    pub spp: u32,
+}
+
+impl Default for PhotonReuseConfig {
+    fn default() -> PhotonReuseConfig {
+        PhotonReuseConfig {
+            paths: 1_000_000,
+            max_photons: 7,
+            reuse: ReuseMode::Error,
+            threshold: 0.001,
+            distribution_map: MapResolution::default(),
+            gather_photons: 64,
+            radius: None,
+            spp: 1,
+        }
+    }
+}
+
+/// Largest accepted path count.
+pub const MAX_PATHS: u32 = 16_000_000;
+
+impl PhotonReuseConfig {
+    pub fn validate(&self) -> Result<(), TechniqueError> {
+        let bad = |field: &str, message: String| Err(TechniqueError::InvalidConfig { field: field.into(), message });
+        if self.paths == 0 || self.paths > MAX_PATHS {
+            return bad("paths", format!("must lie in 1..={MAX_PATHS}"));
+        }
+        if self.max_photons == 0 || self.max_photons > PathWord::MAX_PHOTONS {
+            return bad("max_photons", format!("must lie in 1..={}", PathWord::MAX_PHOTONS));
+        }
+        if !(self.threshold.is_finite() && (0.0..=1.0).contains(&self.threshold)) {
+            return bad("threshold", "must lie in 0..=1 (a relative energy change)".into());
+        }
+        if let Err(message) = self.distribution_map.validate() {
+            return bad("distribution_map", message);
+        }
+        if self.gather_photons == 0 {
+            return bad("gather_photons", "must be at least 1".into());
+        }
+        if let Some(r) = self.radius {
+            if !(r.is_finite() && r > 0.0) {
+                return bad("radius", "must be a positive number of meters".into());
+            }
+        }
+        if self.spp == 0 || self.spp > crate::technique::path::MAX_SPP {
+            return bad("spp", format!("must lie in 1..={}", crate::technique::path::MAX_SPP));
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,194 @@
+//! Error-threshold verification (Moreau et al. 2019, §3.3, Algorithm 1): a segment a moved
+//! surface may cross is re-traced against the full scene; the path keeps going while the energy
+//! reflected at each new vertex stays within `threshold` of what was stored.
+//!
+//! For segment k from vertex k−1 (the light for k = 0) towards photon k:
+//! 1. Skip rule: if the segment misses every moved box, neither end lies on a moved object, and
+//!    its start did not move, nothing can have changed: no ray.
+//! 2. Otherwise trace a ray from the (possibly moved) start towards the stored end. Nothing hit:
+//!    the path now leaves the scene there. A light hit: it ends there (lights absorb).
+//! 3. At the new end, compare the energy reflected towards the next stored vertex,
+//!    E_N = f(−ω_in, ω_out)·|n·ω_out| with the new geometry and material, to E_O, the same with
+//!    the stored geometry and the material the stored energies were made with. Within
+//!    |E_N − E_O| ≤ T·E_O per channel the stored photon energies are kept untouched, so error
+//!    never accumulates over ticks (always against E_O); otherwise the photon moves to the new
+//!    end and a fresh BSDF sample there starts a retraced tail.
+//! 4. A new end within 10⁻⁴ of the segment's length of the stored one keeps the stored photon,
+//!    and the next segment is skipped by rule 1 when its own tests allow.
+//!
+//! Material edits without motion change the energy reflected at a photon by the exact factor
+//! f_new/f_old; the same threshold decides whether that photon's tail is retraced. Specular
+//! vertices only pass when nothing about them changed: their f is a delta.
+use super::store::PathStore;
+use super::trace::{leaving, path_origin, photon_at, surface_normal, Photon, Retrace};
+use super::verify::Changes;
+use crate::core::Rgb;
+use crate::embree::Ray;
+use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
+use glam::Vec3;
+
+/// A new end this close to the stored one (relative to the segment's length) is the same.
+const SAME_PLACE: f32 = 1e-4;
+
+/// What verification decided for a path.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Outcome {
+    Valid,
+    Retrace(Retrace),
+    /// The path now ends after `photons` photons: leaving along `escape`, or absorbed (zero).
+    End {
+        photons: u32,
+        escape: Vec3,
+    },
+}
+
+/// Verification of one path: its outcome, the photons that moved (row, new photon) with their
+/// stored energies kept, the rays traced and the box tests made.
+#[derive(Clone, Debug)]
+pub struct Checked {
+    pub outcome: Outcome,
+    pub moved: Vec<(u32, Photon)>,
+    pub rays: u64,
+    pub tests: u64,
+}
+
+/// Energy reflected at photon `p` (lying on `material`) towards `out`, per unit arriving flux.
+fn reflected(scene: &Scene, material: &Material, p: &Photon, out: Vec3) -> Rgb {
+    let n = surface_normal(scene, p);
+    material.eval(n, -p.incoming, out) * n.dot(out).abs()
+}
+
+fn within(new: Rgb, old: Rgb, threshold: f32) -> bool {
+    let ok = |n: f32, o: f32| (n - o).abs() <= threshold * o;
+    ok(new.r, old.r) && ok(new.g, old.g) && ok(new.b, old.b)
+}
+
+/// Runs Algorithm 1 on `path`. `first_verified`: segment 0 was already checked against the full
+/// scene (its light moved).
+pub fn check_path(
+    scene: &Scene,
+    accel: &SceneAccel,
+    store: &PathStore,
+    path: usize,
+    changes: &Changes,
+    threshold: f32,
+    first_verified: bool,
+) -> Checked {
+    let photons = store.word[path].photons();
+    let escape = store.escape[path];
+    let segments = photons + u32::from(escape != Vec3::ZERO);
+    let mut out = Checked { outcome: Outcome::Valid, moved: Vec::new(), rays: 0, tests: 0 };
+    let material_of = |object: u32| &scene.materials[scene.objects[object as usize].material as usize];
+    // The material the stored energies at an object were computed with.
+    let stored_material_of =
+        |object: u32| changes.previous_material[object as usize].as_ref().unwrap_or(material_of(object));
+    let origin = path_origin(scene, store, path);
+    let mut from: Option<Photon> = None;
+    let mut from_moved = false;
+    for k in 0..segments {
+        let start = from.map_or(origin, |p| p.position);
+        let end = (k < photons).then(|| photon_at(store, path, k as usize));
+        let (dir, t_max) = match &end {
+            Some(e) => (e.position - start, 1.0),
+            None => (escape, f32::INFINITY),
+        };
+        // The stored direction leaving photon k, if the path goes on from it.
+        let next_out = |at: Vec3| {
+            (k + 1 < segments).then(|| match k + 1 < photons {
+                true => (store.rows[k as usize + 1].position[path] - at).normalize_or_zero(),
+                false => escape,
+            })
+        };
+        let (crossed, tests) =
+            if k == 0 && first_verified { (false, 0) } else { changes.boxes.hits(start, dir, t_max) };
+        out.tests += tests;
+        let end_moved = end.is_some_and(|e| changes.moved[e.object as usize]);
+        let start_on_moved = from.is_some_and(|p| changes.moved[p.object as usize]);
+        if !crossed && !end_moved && !from_moved && !start_on_moved {
+            let Some(e) = end else { break };
+            // Only the material at the end may have changed: its exact factor decides.
+            if let (Some(old), Some(wo)) = (&changes.previous_material[e.object as usize], next_out(e.position)) {
+                let current = material_of(e.object);
+                let same = !old.is_specular()
+                    && !current.is_specular()
+                    && within(reflected(scene, current, &e, wo), reflected(scene, old, &e, wo), threshold);
+                if !same {
+                    out.outcome = Outcome::Retrace(Retrace::FreshFrom(k + 1));
+                    return out;
+                }
+            }
+            from = Some(e);
+            from_moved = false;
+            continue;
+        }
+        // A visibility ray along the segment (Algorithm 1, line 5).
+        let dir_n = dir.normalize_or_zero();
+        let ray_origin = from.as_ref().map_or(origin, |p| leaving(scene, p, dir_n));
+        out.rays += 1;
+        let hit = accel.scene().intersect1(&Ray::new(ray_origin, dir_n));
+        let Some(end) = end else {
+            // The escape segment: valid while it still leaves the scene.
+            if hit.is_some() {
+                out.outcome = Outcome::Retrace(if k == 0 { Retrace::KeepSegment(0) } else { Retrace::FreshFrom(k) });
+            }
+            return out;
+        };
+        let resolved = hit.and_then(|h| accel.resolve(&h).map(|r| (h, r)));
+        let Some((h, (SurfaceId::Object(object), prim))) = resolved else {
+            let escape = if hit.is_none() { dir_n } else { Vec3::ZERO };
+            out.outcome = Outcome::End { photons: k, escape };
+            return out;
+        };
+        let sp = scene.surface_point(SurfaceId::Object(object), prim, h.u, h.v);
+        let same_place = object == end.object && (sp.p - end.position).length() <= SAME_PLACE * dir.length();
+        let new = if same_place {
+            Photon { incoming: dir_n, ..end }
+        } else {
+            Photon { position: sp.p, incoming: dir_n, object, prim, power: end.power }
+        };
+        // Compare the energy reflected at the new end with the stored (lines 11–12).
+        if let (Some(old_out), Some(new_out)) = (next_out(end.position), next_out(new.position)) {
+            let (old_m, new_m) = (stored_material_of(end.object), material_of(new.object));
+            let unchanged = same_place && (dir_n - end.incoming).length() <= SAME_PLACE && old_m == new_m;
+            let close = if old_m.is_specular() || new_m.is_specular() {
+                unchanged
+            } else {
+                within(reflected(scene, new_m, &new, new_out), reflected(scene, old_m, &end, old_out), threshold)
+            };
+            if !close {
+                out.moved.push((k, new));
+                out.outcome = Outcome::Retrace(Retrace::FreshFrom(k + 1));
+                return out;
+            }
+        }
+        // Store the new end unless it is the stored one (then the stored photon stays exact).
+        let stored = if same_place && (dir_n - end.incoming).length() <= SAME_PLACE { end } else { new };
+        if stored != end {
+            out.moved.push((k, stored));
+        }
+        from_moved = !same_place;
+        from = Some(stored);
+    }
+    out
+}
+
+/// Writes what verification decided without tracing: moved photons (energies kept) and
+/// shortened paths. Returns the retrace still to do.
+pub fn apply(store: &mut PathStore, path: usize, checked: Checked) -> Option<Retrace> {
+    for (row, p) in checked.moved {
+        let r = &mut store.rows[row as usize];
+        r.position[path] = p.position;
+        r.incoming[path] = p.incoming;
+        r.object[path] = p.object;
+        r.prim[path] = p.prim;
+    }
+    match checked.outcome {
+        Outcome::Valid => None,
+        Outcome::Retrace(r) => Some(r),
+        Outcome::End { photons, escape } => {
+            store.word[path] = store.word[path].with_photons(photons);
+            store.escape[path] = escape;
+            None
+        }
+    }
+}

@@ -1,0 +1,203 @@
+//! Moving lights (Moreau et al. 2019, §3.1 and §4): update path origins, verify the new primary
+//! segments, count DM_C, prune over-full cells and fill short ones.
+//!
+//! Steps for a light that moved this tick, fused into one parallel pass over its paths as the
+//! paper fuses its kernels:
+//! 1. **Update the origin.** Point and spot: the origin is the light's new position and the
+//!    direction points at the path's first photon. Area: the direction is kept and the origin
+//!    is where it meets the light's new plane; a miss of the shape invalidates the path. A path
+//!    that left the scene straight from the light keeps its direction (from the light's centre
+//!    for point and spot lights; moved rigidly with the light for area lights).
+//! 2. **Verify the new primary segment against the full scene** with an occlusion ray (the paper
+//!    skips this for area lights, which lets light leak through walls). An occluded segment is
+//!    re-intersected along its direction and its tail retraced. A first photon on a specular
+//!    surface, or one now lit from its other side, keeps the segment and retraces what it
+//!    reflected.
+//! 3. **DM_C** counts the valid paths per cell; a path whose ray no cell holds is invalid.
+//!
+//! Then, for a light that moved or whose map has not settled since:
+//! 4. **Prune**: in a cell with DM_C > DM_T each path is dropped with probability
+//!    (DM_C − DM_T)/DM_C (eq. 1), marked in a first pass, counted out in a second.
+//! 5. **Fill**: the freed slots (invalid and pruned paths) are handed to the cells below target,
+//!    chosen at random among the missing paths when there are more of those than slots, and
+//!    emitted inside their cell.
+//!
+//! A spot light's falloff makes a path's flux depend on its direction: when the direction
+//! changes, the path's photons are rescaled by the exact ratio of the new to the old flux.
+use super::distribution::{DistributionMap, EmissionFrame};
+use super::store::PathStore;
+use super::trace::{photon_at, surface_normal, Retrace};
+use crate::core::{Rgb, Rng};
+use crate::embree::Ray;
+use crate::scene::{Scene, SceneAccel};
+use crate::technique::nee::SHADOW_EPSILON;
+use glam::{Affine3A, Vec3};
+use rayon::prelude::*;
+
+/// Separates prune and fill random streams from the others keyed by the same numbers.
+const PRUNE_STREAM: u64 = 0x0050_5255_4e45; // "PRUNE"
+const FILL_STREAM: u64 = 0x4649_4c4c; // "FILL"
+
+/// A light with a distribution map: its frame as of the current tick, its map, and the path
+/// slots it owns (fixed at the first tick).
+#[derive(Clone, Debug)]
+pub struct MappedLight {
+    pub frame: EmissionFrame,
+    pub map: DistributionMap,
+    pub slots: Vec<u32>,
+}
+
+/// Where a path stands after its light moved.
+#[derive(Clone, Copy, Debug)]
+pub enum Moved {
+    /// Valid from the new origin; `retrace` says what the new origin broke, if anything.
+    Kept { origin: Vec3, dir: Vec3, scale: Rgb, cell: u32, retrace: Option<Retrace> },
+    /// No cell holds the path's ray any more: its slot is refilled.
+    Invalid,
+}
+
+/// Steps 1–2 for one path of a light that moved from `old_world_from_object`; `paths_of_light`
+/// is how many paths share the light's power. Returns the outcome and the rays traced.
+pub fn update_origin(
+    scene: &Scene,
+    accel: &SceneAccel,
+    store: &PathStore,
+    path: usize,
+    frame: &EmissionFrame,
+    old_world_from_object: Affine3A,
+    paths_of_light: u32,
+) -> (Moved, u64) {
+    let light = store.light[path] as usize;
+    let geometry = &scene.lights[light].geometry;
+    let photons = store.word[path].photons();
+    let old_power = store.emit_power[path];
+    if old_power.is_black() {
+        return (Moved::Invalid, 0);
+    }
+    let position = scene.desc().lights[light].transform.translation();
+    let first = (photons > 0).then(|| photon_at(store, path, 0));
+    let placed = match (&first, frame.is_area(), &store.origin) {
+        (Some(p), false, _) => Some((position, (p.position - position).normalize_or_zero())),
+        (None, false, _) => Some((position, store.emit_dir[path])),
+        (Some(p), true, _) => {
+            frame.origin_on_plane(p.position, store.emit_dir[path]).map(|o| (o, store.emit_dir[path]))
+        }
+        (None, true, Some(origins)) => {
+            let moved = frame.world_from_object() * old_world_from_object.inverse();
+            Some((moved.transform_point3(origins[path]), moved.transform_vector3(store.emit_dir[path]).normalize()))
+        }
+        (None, true, None) => None,
+    };
+    let Some((origin, dir)) = placed.filter(|(_, d)| *d != Vec3::ZERO) else { return (Moved::Invalid, 0) };
+    let Some(cell) = frame.cell_of(origin, dir) else { return (Moved::Invalid, 0) };
+    let new_power = geometry.emission_weight(dir) / paths_of_light.max(1) as f32;
+    let per = |new: f32, old: f32| if old > 0.0 { new / old } else { 1.0 };
+    let scale = Rgb::new(per(new_power.r, old_power.r), per(new_power.g, old_power.g), per(new_power.b, old_power.b));
+    if new_power.is_black() {
+        return (Moved::Invalid, 0);
+    }
+    // The new primary segment, against the full scene.
+    let ray = match &first {
+        Some(p) => Ray::segment(origin, p.position - origin, 1.0 - SHADOW_EPSILON),
+        None => Ray::new(origin, dir),
+    };
+    let occluded = accel.scene().occluded1(&ray);
+    let retrace = if occluded {
+        Some(Retrace::KeepSegment(0))
+    } else {
+        first.and_then(|p| {
+            let reflects = photons > 1 || store.escape[path] != Vec3::ZERO;
+            let n = surface_normal(scene, &p);
+            let material = &scene.materials[scene.objects[p.object as usize].material as usize];
+            let flipped = n.dot(p.incoming).signum() != n.dot(dir).signum();
+            (reflects && (material.is_specular() || flipped)).then_some(Retrace::FreshFrom(1))
+        })
+    };
+    (Moved::Kept { origin, dir, scale, cell, retrace }, 1)
+}
+
+/// Writes a kept path's new origin into the store.
+pub fn apply_moved(store: &mut PathStore, path: usize, origin: Vec3, dir: Vec3, scale: Rgb, cell: u32) {
+    if let Some(origins) = &mut store.origin {
+        origins[path] = origin;
+    }
+    store.emit_dir[path] = dir;
+    store.word[path] = store.word[path].with_cell(cell);
+    if store.word[path].photons() > 0 {
+        store.rows[0].incoming[path] = dir;
+    }
+    if scale != Rgb::WHITE {
+        store.emit_power[path] *= scale;
+        for row in store.rows.iter_mut().take(store.word[path].photons() as usize) {
+            row.power[path] *= scale;
+        }
+    }
+}
+
+/// What balancing one light's map did.
+#[derive(Clone, Debug, Default)]
+pub struct Balance {
+    pub work: Vec<(usize, Retrace)>,
+    pub pruned: u64,
+    pub filled: u64,
+}
+
+/// Steps 3–5 for one light: counts the valid paths (`valid[i]` for `slots[i]`), prunes, and
+/// fills the freed slots. The map's DM_C is left as it will be once the fills are traced.
+pub fn balance(lm: &mut MappedLight, store: &PathStore, valid: &[bool], seed: u64, tick: u64, light: usize) -> Balance {
+    let (map, slots) = (&mut lm.map, &lm.slots);
+    map.current.iter_mut().for_each(|c| *c = 0);
+    for (&slot, &ok) in slots.iter().zip(valid) {
+        if ok {
+            map.current[store.word[slot as usize].cell() as usize] += 1;
+        }
+    }
+    // Prune: mark with the counts as they were, then count the marked paths out.
+    let pruned: Vec<bool> = slots
+        .par_iter()
+        .zip(valid)
+        .map(|(&slot, &ok)| {
+            let cell = store.word[slot as usize].cell() as usize;
+            let (c, t) = (map.current[cell], map.target[cell]);
+            ok && c > t && {
+                let mut rng = Rng::for_sample(seed, tick, slot as u64, PRUNE_STREAM);
+                rng.next_f32() < (c - t) as f32 / c as f32
+            }
+        })
+        .collect();
+    let mut free = Vec::new();
+    let mut out = Balance::default();
+    for ((&slot, &ok), &cut) in slots.iter().zip(valid).zip(&pruned) {
+        if cut {
+            map.current[store.word[slot as usize].cell() as usize] -= 1;
+            out.pruned += 1;
+        }
+        if cut || !ok {
+            free.push(slot as usize);
+        }
+    }
+    // Fill: one missing path per free slot, at random when slots are short.
+    let mut missing: Vec<u32> = Vec::new();
+    for (cell, (&t, &c)) in map.target.iter().zip(&map.current).enumerate() {
+        missing.extend(std::iter::repeat_n(cell as u32, t.saturating_sub(c) as usize));
+    }
+    let mut rng = Rng::for_sample(seed, tick, light as u64, FILL_STREAM);
+    if missing.len() > free.len() {
+        for i in 0..free.len() {
+            let j = i + (rng.next_u32() as usize % (missing.len() - i));
+            missing.swap(i, j);
+        }
+        missing.truncate(free.len());
+    }
+    for (k, &slot) in free.iter().enumerate() {
+        match missing.get(k) {
+            Some(&cell) => {
+                map.current[cell as usize] += 1;
+                out.work.push((slot, Retrace::Fill(cell)));
+                out.filled += 1;
+            }
+            None => out.work.push((slot, Retrace::Emit)),
+        }
+    }
+    out
+}

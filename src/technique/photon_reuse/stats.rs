@@ -1,0 +1,60 @@
+//! Per-tick figures of `photon_reuse`: paths by fate, rays by kind, time by stage, memory by
+//! structure. Times in milliseconds, memory in bytes.
+use super::store::StoreMemory;
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct PhotonStats {
+    // Paths.
+    pub paths: u64,
+    pub untouched: u64,
+    pub partly_retraced: u64,
+    pub fully_retraced: u64,
+    /// Dropped from over-full distribution-map cells (eq. 1).
+    pub pruned: u64,
+    /// Emitted into cells below target.
+    pub filled: u64,
+    // Rays by kind.
+    /// Occlusion rays checking the new primary segments of moved lights.
+    pub origin_rays: u64,
+    /// Visibility rays of `error` mode's verification.
+    pub verify_rays: u64,
+    /// Rays of retraced segments.
+    pub retrace_rays: u64,
+    /// Rays of paths filled into distribution-map cells.
+    pub fill_rays: u64,
+    pub camera_rays: u64,
+    pub specular_rays: u64,
+    pub shadow_rays: u64,
+    /// Segment-against-box tests made by verification.
+    pub verify_box_tests: u64,
+    // Time by stage.
+    /// Update origins of moved lights, with their primary-segment rays, and count DM_C.
+    pub origins_ms: f64,
+    /// Dynamic occlusions: verification against moved surfaces and edited materials.
+    pub verify_ms: f64,
+    pub prune_ms: f64,
+    /// Tracing the filled paths.
+    pub fill_ms: f64,
+    /// Tracing the other retraced paths.
+    pub trace_ms: f64,
+    pub grid_ms: f64,
+    pub render_ms: f64,
+    // Gather and distribution maps.
+    pub radius: f32,
+    pub grid_photons: u64,
+    /// Largest χ² of DM_C against DM_T over the lights with a map, after this tick's fill.
+    pub distribution_chi2: f64,
+    /// Cells of the map with that χ² (its degrees of freedom + 1).
+    pub distribution_cells: u64,
+    // Memory.
+    pub memory: StoreMemory,
+    pub grid_bytes: u64,
+}
+
+impl PhotonStats {
+    /// Rays traced for photon paths this tick: verification, retraced and filled segments.
+    pub fn photon_rays(&self) -> u64 {
+        self.origin_rays + self.verify_rays + self.retrace_rays + self.fill_rays
+    }
+}
