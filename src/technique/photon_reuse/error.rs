@@ -82,14 +82,17 @@ pub fn check_path(
     // The material the stored energies at an object were computed with.
     let stored_material_of =
         |object: u32| changes.previous_material[object as usize].as_ref().unwrap_or(material_of(object));
-    let origin = path_origin(scene, store, path);
-    let mut from: Option<Photon> = None;
-    let mut from_moved = false;
+    // The segment's start: the light's origin, or vertex k−1 with its object; `updated` holds
+    // vertex k−1 when this tick moved it (otherwise the store has it).
+    let mut start = path_origin(scene, store, path);
+    let mut start_object: Option<u32> = None;
+    let mut updated: Option<Photon> = None;
     for k in 0..segments {
-        let start = from.map_or(origin, |p| p.position);
-        let end = (k < photons).then(|| photon_at(store, path, k as usize));
-        let (dir, t_max) = match &end {
-            Some(e) => (e.position - start, 1.0),
+        // Only the end's position and object are read until a ray is needed.
+        let stored_end =
+            (k < photons).then(|| (store.rows[k as usize].position[path], store.rows[k as usize].object[path]));
+        let (dir, t_max) = match stored_end {
+            Some((position, _)) => (position - start, 1.0),
             None => (escape, f32::INFINITY),
         };
         // The stored direction leaving photon k, if the path goes on from it.
@@ -99,15 +102,15 @@ pub fn check_path(
                 false => escape,
             })
         };
-        let (crossed, tests) =
-            if k == 0 && first_verified { (false, 0) } else { changes.boxes.hits(start, dir, t_max) };
+        let (crossed, tests) = if k == 0 && first_verified { (false, 0) } else { changes.boxes.hits(start, dir, t_max) };
         out.tests += tests;
-        let end_moved = end.is_some_and(|e| changes.moved[e.object as usize]);
-        let start_on_moved = from.is_some_and(|p| changes.moved[p.object as usize]);
-        if !crossed && !end_moved && !from_moved && !start_on_moved {
-            let Some(e) = end else { break };
+        let end_moved = stored_end.is_some_and(|(_, o)| changes.moved[o as usize]);
+        let start_on_moved = start_object.is_some_and(|o| changes.moved[o as usize]);
+        if !crossed && !end_moved && updated.is_none() && !start_on_moved {
+            let Some((end_position, end_object)) = stored_end else { break };
             // Only the material at the end may have changed: its exact factor decides.
-            if let (Some(old), Some(wo)) = (&changes.previous_material[e.object as usize], next_out(e.position)) {
+            if let (Some(old), Some(wo)) = (&changes.previous_material[end_object as usize], next_out(end_position)) {
+                let e = photon_at(store, path, k as usize);
                 let current = material_of(e.object);
                 let same = !old.is_specular()
                     && !current.is_specular()
@@ -117,22 +120,27 @@ pub fn check_path(
                     return out;
                 }
             }
-            from = Some(e);
-            from_moved = false;
+            start = end_position;
+            start_object = Some(end_object);
             continue;
         }
         // A visibility ray along the segment (Algorithm 1, line 5).
         let dir_n = dir.normalize_or_zero();
-        let ray_origin = from.as_ref().map_or(origin, |p| leaving(scene, p, dir_n));
+        let ray_origin = match start_object {
+            None => start,
+            Some(_) => leaving(scene, &updated.unwrap_or_else(|| photon_at(store, path, k as usize - 1)), dir_n),
+        };
         out.rays += 1;
         let hit = accel.scene().intersect1(&Ray::new(ray_origin, dir_n));
-        let Some(end) = end else {
+        let Some(_) = stored_end else {
             // The escape segment: valid while it still leaves the scene.
             if hit.is_some() {
-                out.outcome = Outcome::Retrace(if k == 0 { Retrace::KeepSegment(0) } else { Retrace::FreshFrom(k) });
+                out.outcome =
+                    Outcome::Retrace(if k == 0 { Retrace::KeepSegment(0) } else { Retrace::FreshFrom(k) });
             }
             return out;
         };
+        let end = photon_at(store, path, k as usize);
         let resolved = hit.and_then(|h| accel.resolve(&h).map(|r| (h, r)));
         let Some((h, (SurfaceId::Object(object), prim))) = resolved else {
             let escape = if hit.is_none() { dir_n } else { Vec3::ZERO };
@@ -166,8 +174,9 @@ pub fn check_path(
         if stored != end {
             out.moved.push((k, stored));
         }
-        from_moved = !same_place;
-        from = Some(stored);
+        start = stored.position;
+        start_object = Some(stored.object);
+        updated = (!same_place).then_some(stored);
     }
     out
 }

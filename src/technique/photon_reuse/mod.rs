@@ -340,27 +340,43 @@ impl PhotonReuse {
             })
             .collect();
         let changes = Changes { boxes: BoxTree::new(boxes), moved, previous_material };
-        let todo: Vec<usize> = (0..store.paths).filter(|&i| standing[i] != Standing::Decided).collect();
+        let todo = || (0..store.paths).into_par_iter().filter(|&i| standing[i] != Standing::Decided);
         let first_verified = |i: usize| standing[i] == Standing::FirstVerified;
         if self.config.reuse == ReuseMode::Naive {
-            let checked: Vec<(Option<Retrace>, u64)> =
-                todo.par_iter().map(|&i| verify::check_path(scene, store, i, &changes, first_verified(i))).collect();
-            for (&i, (retrace, tests)) in todo.iter().zip(checked) {
-                self.pending.verify_box_tests += tests;
-                plan[i] = retrace;
+            let (tests, failed) = todo()
+                .fold(
+                    || (0u64, Vec::new()),
+                    |(tests, mut failed), i| {
+                        let (retrace, made) = verify::check_path(scene, store, i, &changes, first_verified(i));
+                        failed.extend(retrace.map(|r| (i, r)));
+                        (tests + made, failed)
+                    },
+                )
+                .reduce(|| (0, Vec::new()), |a, b| (a.0 + b.0, [a.1, b.1].concat()));
+            self.pending.verify_box_tests += tests;
+            for (i, r) in failed {
+                plan[i] = Some(r);
             }
             return false;
         }
         let threshold = self.config.threshold;
-        let checked: Vec<error::Checked> = todo
-            .par_iter()
-            .map(|&i| error::check_path(scene, ctx.accel, store, i, &changes, threshold, first_verified(i)))
-            .collect();
-        let mut moved_photons = false;
-        for (&i, c) in todo.iter().zip(checked) {
-            self.pending.verify_box_tests += c.tests;
-            self.pending.verify_rays += c.rays;
-            moved_photons |= !c.moved.is_empty() || matches!(c.outcome, error::Outcome::End { .. });
+        let (tests, rays, decided) = todo()
+            .fold(
+                || (0u64, 0u64, Vec::new()),
+                |(tests, rays, mut decided), i| {
+                    let c = error::check_path(scene, ctx.accel, store, i, &changes, threshold, first_verified(i));
+                    let (t, r) = (c.tests, c.rays);
+                    if c.outcome != error::Outcome::Valid || !c.moved.is_empty() {
+                        decided.push((i, c));
+                    }
+                    (tests + t, rays + r, decided)
+                },
+            )
+            .reduce(|| (0, 0, Vec::new()), |a, b| (a.0 + b.0, a.1 + b.1, [a.2, b.2].concat()));
+        self.pending.verify_box_tests += tests;
+        self.pending.verify_rays += rays;
+        let moved_photons = !decided.is_empty();
+        for (i, c) in decided {
             plan[i] = error::apply(store, i, c);
         }
         moved_photons
