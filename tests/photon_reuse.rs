@@ -14,7 +14,7 @@ fn config(paths: u32, reuse: ReuseMode) -> PhotonReuseConfig {
 
 fn stats(frame: &relume::engine::Frame) -> PhotonStats {
     match &frame.stats.detail {
-        TechniqueStats::PhotonReuse(s) => s.clone(),
+        TechniqueStats::PhotonReuse(s) => (**s).clone(),
         other => panic!("photon_reuse stats expected, got {other:?}"),
     }
 }

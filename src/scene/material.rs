@@ -76,6 +76,23 @@ impl Material {
         }
     }
 
+    /// The weight `f·|cos|/pdf` with which [`Material::sample`] returns `wi` (for specular
+    /// lobes, the lobe's weight with the lobe choice cancelled): the reflectance for diffuse and
+    /// mirror, 1 for glass reflection and 1/η² for glass transmission. Black if `wi` lies on a
+    /// side the material cannot send light to.
+    pub fn sampled_weight(&self, n: Vec3, wo: Vec3, wi: Vec3) -> Rgb {
+        let same_side = n.dot(wo) * n.dot(wi) > 0.0;
+        match self {
+            Material::Diffuse { reflectance } | Material::Mirror { reflectance } if same_side => *reflectance,
+            Material::Glass { .. } if same_side => Rgb::WHITE,
+            Material::Glass { ior } => {
+                let eta = if n.dot(wo) > 0.0 { *ior } else { 1.0 / *ior };
+                Rgb::splat(1.0 / (eta * eta))
+            }
+            _ => Rgb::BLACK,
+        }
+    }
+
     /// Samples an incident direction. `u` drives the direction, `uc` the lobe choice.
     pub fn sample(&self, n: Vec3, wo: Vec3, u: Vec2, uc: f32) -> Option<BsdfSample> {
         let cos_o = n.dot(wo);

@@ -68,7 +68,7 @@ pub struct RenderStats {
 #[serde(tag = "id", rename_all = "snake_case")]
 pub enum TechniqueStats {
     Path(path::PathStats),
-    PhotonReuse(photon_reuse::PhotonStats),
+    PhotonReuse(Box<photon_reuse::PhotonStats>),
 }
 
 /// Which technique to run, with its parameters. JSON: `{"id": "path", "spp": 4, ...}`.

@@ -5,8 +5,8 @@
 //! For segment k from vertex k−1 (the light for k = 0) towards photon k:
 //! 1. Skip rule: if the segment misses every moved box, neither end lies on a moved object, and
 //!    its start did not move, nothing can have changed: no ray.
-//! 2. Otherwise trace a ray from the (possibly moved) start towards the stored end. Nothing hit:
-//!    the path now leaves the scene there. A light hit: it ends there (lights absorb).
+//! 2. Otherwise trace a ray from the (possibly moved) start towards the stored end. Nothing or a
+//!    light hit: the path now ends there (it leaves the scene; lights absorb).
 //! 3. At the new end, compare the energy reflected towards the next stored vertex,
 //!    E_N = f(−ω_in, ω_out)·|n·ω_out| with the new geometry and material, to E_O, the same with
 //!    the stored geometry and the material the stored energies were made with. Within
@@ -19,6 +19,10 @@
 //! Material edits without motion change the energy reflected at a photon by the exact factor
 //! f_new/f_old; the same threshold decides whether that photon's tail is retraced. Specular
 //! vertices only pass when nothing about them changed: their f is a delta.
+//!
+//! Russian roulette: a path that roulette ended at a photon that moved, or whose material
+//! changed, draws its roulette again there (a fresh tail). Keeping the old verdict would bias
+//! the estimate low: the path would go on with probability q_old·q_new instead of q_new.
 use super::store::PathStore;
 use super::trace::{leaving, path_origin, photon_at, surface_normal, Photon, Retrace};
 use super::verify::Changes;
@@ -102,12 +106,21 @@ pub fn check_path(
                 false => escape,
             })
         };
-        let (crossed, tests) = if k == 0 && first_verified { (false, 0) } else { changes.boxes.hits(start, dir, t_max) };
+        let (crossed, tests) =
+            if k == 0 && first_verified { (false, 0) } else { changes.boxes.hits(start, dir, t_max) };
         out.tests += tests;
         let end_moved = stored_end.is_some_and(|(_, o)| changes.moved[o as usize]);
         let start_on_moved = start_object.is_some_and(|o| changes.moved[o as usize]);
         if !crossed && !end_moved && updated.is_none() && !start_on_moved {
             let Some((end_position, end_object)) = stored_end else { break };
+            // A new material at a photon where roulette ended the path changes the roulette.
+            if changes.previous_material[end_object as usize].is_some()
+                && k + 1 == segments
+                && k + 1 < store.max_photons as u32
+            {
+                out.outcome = Outcome::Retrace(Retrace::FreshFrom(k + 1));
+                return out;
+            }
             // Only the material at the end may have changed: its exact factor decides.
             if let (Some(old), Some(wo)) = (&changes.previous_material[end_object as usize], next_out(end_position)) {
                 let e = photon_at(store, path, k as usize);
@@ -133,18 +146,17 @@ pub fn check_path(
         out.rays += 1;
         let hit = accel.scene().intersect1(&Ray::new(ray_origin, dir_n));
         let Some(_) = stored_end else {
-            // The escape segment: valid while it still leaves the scene.
-            if hit.is_some() {
-                out.outcome =
-                    Outcome::Retrace(if k == 0 { Retrace::KeepSegment(0) } else { Retrace::FreshFrom(k) });
+            // The escape segment: valid while it still meets no object (nothing, or a light).
+            if hit.and_then(|h| accel.resolve(&h)).is_some_and(|(surface, _)| matches!(surface, SurfaceId::Object(_))) {
+                out.outcome = Outcome::Retrace(Retrace::KeepSegment(k));
             }
             return out;
         };
         let end = photon_at(store, path, k as usize);
         let resolved = hit.and_then(|h| accel.resolve(&h).map(|r| (h, r)));
         let Some((h, (SurfaceId::Object(object), prim))) = resolved else {
-            let escape = if hit.is_none() { dir_n } else { Vec3::ZERO };
-            out.outcome = Outcome::End { photons: k, escape };
+            // The segment now leaves the scene or ends on a light: the path ends here.
+            out.outcome = Outcome::End { photons: k, escape: dir_n };
             return out;
         };
         let sp = scene.surface_point(SurfaceId::Object(object), prim, h.u, h.v);
@@ -154,6 +166,16 @@ pub fn check_path(
         } else {
             Photon { position: sp.p, incoming: dir_n, object, prim, power: end.power }
         };
+        // A path that Russian roulette ended at the old end must draw its roulette again where
+        // it ends now: keeping the old verdict would end it with probability (1−q_old) and
+        // continue it only with q_old·q_new, losing energy.
+        let ended_by_roulette = k + 1 == segments && k + 1 < store.max_photons as u32;
+        let same_material = stored_material_of(end.object) == material_of(new.object);
+        if ended_by_roulette && !(same_place && same_material) {
+            out.moved.push((k, new));
+            out.outcome = Outcome::Retrace(Retrace::FreshFrom(k + 1));
+            return out;
+        }
         // Compare the energy reflected at the new end with the stored (lines 11–12).
         if let (Some(old_out), Some(new_out)) = (next_out(end.position), next_out(new.position)) {
             let (old_m, new_m) = (stored_material_of(end.object), material_of(new.object));
@@ -164,8 +186,11 @@ pub fn check_path(
                 within(reflected(scene, new_m, &new, new_out), reflected(scene, old_m, &end, old_out), threshold)
             };
             if !close {
+                // Where the vertex and its material stayed, its roulette verdict stands.
                 out.moved.push((k, new));
-                out.outcome = Outcome::Retrace(Retrace::FreshFrom(k + 1));
+                let fresh =
+                    if same_place && same_material { Retrace::Redirect(k + 1) } else { Retrace::FreshFrom(k + 1) };
+                out.outcome = Outcome::Retrace(fresh);
                 return out;
             }
         }

@@ -36,6 +36,8 @@ pub struct PhotonGrid {
     mask: u64,
     /// `starts[b]..starts[b + 1]` are bucket b's photons.
     starts: Vec<u32>,
+    /// Total flux of the gathered photons (W), summed in order in f64.
+    pub power: [f64; 3],
     photons: Vec<GridPhoton>,
 }
 
@@ -89,7 +91,10 @@ impl PhotonGrid {
             sorted[fill[k] as usize] = *p;
             fill[k] += 1;
         }
-        PhotonGrid { radius, inv_cell, mask, starts, photons: sorted }
+        let power = photons
+            .iter()
+            .fold([0.0f64; 3], |s, p| [s[0] + p.power.r as f64, s[1] + p.power.g as f64, s[2] + p.power.b as f64]);
+        PhotonGrid { radius, inv_cell, mask, starts, photons: sorted, power }
     }
 
     pub fn len(&self) -> usize {

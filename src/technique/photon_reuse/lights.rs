@@ -12,7 +12,7 @@
 //!    skips this for area lights, which lets light leak through walls). An occluded segment is
 //!    re-intersected along its direction and its tail retraced. A first photon on a specular
 //!    surface, or one now lit from its other side, keeps the segment and retraces what it
-//!    reflected.
+//!    reflected (in a new direction; the roulette that let it go on stands).
 //! 3. **DM_C** counts the valid paths per cell; a path whose ray no cell holds is invalid.
 //!
 //! Then, for a light that moved or whose map has not settled since:
@@ -110,7 +110,7 @@ pub fn update_origin(
             let n = surface_normal(scene, &p);
             let material = &scene.materials[scene.objects[p.object as usize].material as usize];
             let flipped = n.dot(p.incoming).signum() != n.dot(dir).signum();
-            (reflects && (material.is_specular() || flipped)).then_some(Retrace::FreshFrom(1))
+            (reflects && (material.is_specular() || flipped)).then_some(Retrace::Redirect(1))
         })
     };
     (Moved::Kept { origin, dir, scale, cell, retrace }, 1)

@@ -469,9 +469,10 @@ impl Technique for PhotonReuse {
         stats.shadow_rays = rays.shadow;
         stats.radius = self.grid.radius;
         stats.grid_photons = self.grid.len() as u64;
+        stats.grid_power = self.grid.power;
         stats.grid_bytes = self.grid.memory_bytes();
         let counts =
             RayCounts { primary: rays.camera, secondary: rays.specular + stats.retrace_rays, shadow: rays.shadow };
-        Ok(RenderStats { rays: counts, detail: TechniqueStats::PhotonReuse(stats) })
+        Ok(RenderStats { rays: counts, detail: TechniqueStats::PhotonReuse(Box::new(stats)) })
     }
 }

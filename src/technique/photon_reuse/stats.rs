@@ -43,6 +43,8 @@ pub struct PhotonStats {
     // Gather and distribution maps.
     pub radius: f32,
     pub grid_photons: u64,
+    /// Total flux of the gathered photons (W per channel): the indirect light in the map.
+    pub grid_power: [f64; 3],
     /// Largest χ² of DM_C against DM_T over the lights with a map, after this tick's fill.
     pub distribution_chi2: f64,
     /// Cells of the map with that χ² (its degrees of freedom + 1).

@@ -104,7 +104,8 @@ pub struct PathStore {
     /// Direction and flux of segment 0.
     pub emit_dir: Vec<Vec3>,
     pub emit_power: Vec<Rgb>,
-    /// Direction of the last segment if it left the scene; zero if the path ended on a surface.
+    /// Direction of the last segment if it left the scene or ended on a light; zero if the path
+    /// ended at its last photon (roulette or B).
     pub escape: Vec<Vec3>,
     /// Bumped whenever the path is retraced, so the new tail draws fresh random numbers.
     pub generation: Vec<u32>,

@@ -31,10 +31,15 @@ pub enum Retrace {
     /// Emit anew from the path's light: new origin, direction and tail.
     Emit,
     /// Re-intersect segment `k` along its stored direction with its stored flux, then continue
-    /// with a fresh tail (the vertex it leaves did not change).
+    /// with a fresh tail (the vertex it leaves did not change). For the escape segment (`k` =
+    /// the path's photon count) the flux is recomputed from photon `k − 1` and its BSDF.
     KeepSegment(u32),
     /// Sample a fresh direction at photon `k − 1` and trace a fresh tail from there.
     FreshFrom(u32),
+    /// Sample a fresh direction at photon `k − 1` whose Russian roulette already let the path
+    /// go on (its vertex did not change, only what lies beyond): the roulette is not drawn
+    /// again, which would continue the path with probability q² instead of q.
+    Redirect(u32),
     /// Emit anew inside distribution-map cell `c` of the path's light (§3.1, "fill").
     Fill(u32),
 }
@@ -127,14 +132,28 @@ impl Tracer<'_> {
             Retrace::KeepSegment(0) => {
                 (path_origin(scene, store, path), store.emit_dir[path], store.emit_power[path], 0)
             }
-            Retrace::KeepSegment(k) => {
+            Retrace::KeepSegment(k) if k < store.word[path].photons() => {
                 let prev = photon_at(store, path, k as usize - 1);
                 let next = photon_at(store, path, k as usize);
                 (leaving(scene, &prev, next.incoming), next.incoming, next.power, k)
             }
-            Retrace::FreshFrom(k) => {
+            Retrace::KeepSegment(k) => {
+                // The path's escape segment: its flux is what leaves photon k − 1 along it.
                 let prev = photon_at(store, path, k as usize - 1);
-                match scatter(scene, &prev, &mut rng) {
+                let escape = store.escape[path];
+                let material = &scene.materials[scene.objects[prev.object as usize].material as usize];
+                let w = material.sampled_weight(surface_normal(scene, &prev), -prev.incoming, escape);
+                let q = w.max_component().min(1.0);
+                if q <= 0.0 {
+                    tail.from = k;
+                    return tail;
+                }
+                (leaving(scene, &prev, escape), escape, prev.power * w / q, k)
+            }
+            Retrace::FreshFrom(k) | Retrace::Redirect(k) => {
+                let prev = photon_at(store, path, k as usize - 1);
+                let roulette = matches!(how, Retrace::FreshFrom(_));
+                match scatter(scene, &prev, &mut rng, roulette) {
                     Some((o, d, p)) => (o, d, p, k),
                     None => {
                         tail.from = k;
@@ -153,7 +172,12 @@ impl Tracer<'_> {
                 tail.escape = dir;
                 break;
             };
-            let Some((SurfaceId::Object(object), prim)) = accel.resolve(&hit) else { break };
+            let Some((SurfaceId::Object(object), prim)) = accel.resolve(&hit) else {
+                // A light absorbs the path; its last segment is kept like an escape, so an
+                // object moving into it is noticed.
+                tail.escape = dir;
+                break;
+            };
             let sp = scene.surface_point(SurfaceId::Object(object), prim, hit.u, hit.v);
             let photon = Photon { position: sp.p, incoming: dir, object, prim, power };
             tail.photons.push(photon);
@@ -161,7 +185,7 @@ impl Tracer<'_> {
             if row >= max {
                 break;
             }
-            match scatter(scene, &photon, &mut rng) {
+            match scatter(scene, &photon, &mut rng, true) {
                 Some((o, d, p)) => {
                     origin = o;
                     dir = d;
@@ -190,13 +214,15 @@ pub fn surface_normal(scene: &Scene, p: &Photon) -> Vec3 {
     (b - a).cross(c - a).normalize_or_zero()
 }
 
-/// Samples the BSDF at a photon with Russian roulette; returns the next ray and flux.
-fn scatter(scene: &Scene, p: &Photon, rng: &mut Rng) -> Option<(Vec3, Vec3, Rgb)> {
+/// Samples the BSDF at a photon; returns the next ray and flux, divided by the continuation
+/// probability q = min(1, max weight). With `roulette` the path ends with probability 1 − q;
+/// without, the caller knows the path already survived q at this photon.
+fn scatter(scene: &Scene, p: &Photon, rng: &mut Rng, roulette: bool) -> Option<(Vec3, Vec3, Rgb)> {
     let material = &scene.materials[scene.objects[p.object as usize].material as usize];
     let n = surface_normal(scene, p);
     let bs = material.sample(n, -p.incoming, rng.next_2d(), rng.next_f32())?;
     let q = bs.weight.max_component().min(1.0);
-    if q <= 0.0 || rng.next_f32() >= q {
+    if q <= 0.0 || (roulette && rng.next_f32() >= q) {
         return None;
     }
     Some((offset_towards(p.position, n, bs.wi), bs.wi, p.power * bs.weight / q))

@@ -166,10 +166,7 @@ pub fn check_path(
         let (crossed, made) = if k == 0 && first_verified { (false, 0) } else { changes.boxes.hits(start, dir, t_max) };
         tests += made;
         if crossed {
-            return (
-                Some(if ends_on_photon || k == 0 { Retrace::KeepSegment(k) } else { Retrace::FreshFrom(k) }),
-                tests,
-            );
+            return (Some(Retrace::KeepSegment(k)), tests);
         }
         if ends_on_photon {
             let object = store.rows[k as usize].object[path] as usize;
@@ -177,9 +174,11 @@ pub fn check_path(
             if changes.moved[object] {
                 return (Some(Retrace::KeepSegment(k)), tests);
             }
-            // The photon's surface reflects differently now: retrace what it reflected.
+            // The photon's surface reflects differently now: retrace what it reflected, and draw
+            // the roulette again where it ended the path.
             if changes.previous_material[object].is_some() {
-                return ((k + 1 < segments).then_some(Retrace::FreshFrom(k + 1)), tests);
+                let goes_on = k + 1 < segments || k + 1 < store.max_photons as u32;
+                return (goes_on.then_some(Retrace::FreshFrom(k + 1)), tests);
             }
             start = store.rows[k as usize].position[path];
         }

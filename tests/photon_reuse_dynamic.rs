@@ -1,0 +1,271 @@
+//! photon_reuse under motion: distribution maps, primary-segment verification, error mode's
+//! ray savings and its freedom from drift, and every mode against the `path` reference.
+mod common;
+use common::*;
+use relume::embree::Device;
+use relume::engine::{thread_pool, Frame, Session};
+use relume::scene::animation::Animation;
+use relume::scene::edits::Edit;
+use relume::scene::{Scene, SceneDesc, Trs};
+use relume::technique::photon_reuse::{PhotonReuseConfig, PhotonStats, ReuseMode};
+use relume::technique::{TechniqueConfig, TechniqueStats};
+use serde_json::json;
+use statrs::distribution::{ChiSquared, ContinuousCDF};
+
+fn stats(frame: &Frame) -> PhotonStats {
+    match &frame.stats.detail {
+        TechniqueStats::PhotonReuse(s) => (**s).clone(),
+        other => panic!("photon_reuse stats expected, got {other:?}"),
+    }
+}
+
+fn scene_from(v: serde_json::Value) -> Scene {
+    let desc: SceneDesc = serde_json::from_value(v).expect("scene JSON");
+    Scene::from_desc(desc, &scenes_dir(), &scenes_dir()).expect("valid scene")
+}
+
+fn session(scene: Scene, config: PhotonReuseConfig, seed: u64, device: &Device) -> Session {
+    Session::new(scene, &TechniqueConfig::PhotonReuse(config), seed, device).expect("session")
+}
+
+const UP: [f32; 4] = [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2];
+const DOWN: [f32; 4] = [std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2];
+
+fn trs(translation: [f32; 3], rotation: [f32; 4], scale: [f32; 3]) -> Trs {
+    Trs { translation, rotation, scale }
+}
+
+fn move_light(name: &str, transform: Trs) -> Edit {
+    Edit::Light { name: name.into(), transform: Some(transform), emitter: None }
+}
+
+/// A floor under a slab that spans the whole room, lit by a dynamic rect light below the slab.
+fn slab_room() -> Scene {
+    scene_from(json!({
+        "camera": {"position": [0, 1, -2.5], "look_at": [0, 0, 0], "vfov_deg": 60, "resolution": [16, 16]},
+        "materials": {"white": {"type": "diffuse", "reflectance": [0.8, 0.8, 0.8]}},
+        "objects": [
+            {"name": "floor", "shape": {"type": "quad"}, "material": "white",
+             "transform": {"rotation": UP, "scale": [3, 3, 1]}},
+            {"name": "slab", "shape": {"type": "box"}, "material": "white",
+             "transform": {"translation": [0, 2.05, 0], "scale": [4, 0.05, 4]}}
+        ],
+        "lights": [{"name": "panel", "dynamic": true,
+                    "emitter": {"type": "rect", "radiance": [10, 10, 10]},
+                    "transform": {"translation": [0, 1.5, 0], "rotation": DOWN, "scale": [0.25, 0.25, 1]}}]
+    }))
+}
+
+#[test]
+fn a_light_moved_above_a_slab_leaks_no_light_below_it() {
+    // Property: kept paths are re-anchored on the light's new plane, and their new primary
+    // segments are verified against the full scene. Without that check the floor would keep
+    // its photons (and its bounce light) although the slab now hides the light.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    for reuse in [ReuseMode::Naive, ReuseMode::Error] {
+        pool.install(|| {
+            let config = PhotonReuseConfig { paths: 40_000, reuse, ..PhotonReuseConfig::default() };
+            let mut s = session(slab_room(), config, 4, &device);
+            let lit = s.tick().unwrap().image.mean();
+            assert!(lit.g > 0.01, "{reuse:?}: the floor should be lit first: {lit:?}");
+            s.queue_edits(vec![move_light("panel", trs([0.0, 2.6, 0.0], DOWN, [0.25, 0.25, 1.0]))]).unwrap();
+            let moved = s.tick().unwrap();
+            let st = stats(&moved);
+            assert!(st.origin_rays > 0, "{reuse:?}: no primary segment was verified: {st:?}");
+            assert!(st.partly_retraced + st.fully_retraced > 0);
+            for _ in 0..3 {
+                let dark = s.tick().unwrap().image;
+                assert_finite_non_negative(&dark);
+                let m = dark.mean();
+                assert!(m.max_component() == 0.0, "{reuse:?}: light leaked below the slab: {m:?}");
+            }
+        });
+    }
+}
+
+/// A dynamic light of the given emitter inside a closed unit sphere.
+fn sphere_with(emitter: serde_json::Value, rotation: [f32; 4], scale: [f32; 3]) -> Scene {
+    scene_from(json!({
+        "camera": {"position": [0, 0, 0.5], "look_at": [0, 0, -1], "vfov_deg": 60, "resolution": [8, 8]},
+        "materials": {"half": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+        "objects": [{"name": "sphere", "shape": {"type": "sphere", "segments": 64}, "material": "half"}],
+        "lights": [{"name": "lamp", "dynamic": true, "emitter": emitter,
+                    "transform": {"rotation": rotation, "scale": scale}}]
+    }))
+}
+
+#[test]
+fn distribution_maps_converge_to_their_targets_after_a_light_stops() {
+    // Property: after a light moves and stops, prune and fill bring DM_C to DM_T: the χ² of
+    // the counts against the targets falls below the 1% critical value within 8 ticks. Before
+    // the light ever moves it has no map at all.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    let cases = [
+        ("point", sphere_with(json!({"type": "point", "intensity": [1, 1, 1]}), [0.0, 0.0, 0.0, 1.0], [1.0; 3])),
+        ("spot", sphere_with(json!({"type": "spot", "intensity": [1, 1, 1], "cone_deg": 50}), DOWN, [1.0; 3])),
+        ("rect", sphere_with(json!({"type": "rect", "radiance": [1, 1, 1]}), DOWN, [0.3, 0.3, 1.0])),
+    ];
+    for (name, scene) in cases {
+        pool.install(|| {
+            let config = PhotonReuseConfig {
+                paths: 60_000,
+                reuse: ReuseMode::Naive,
+                distribution_map: relume::technique::photon_reuse::MapResolution {
+                    position: [4, 4],
+                    direction: [16, 16],
+                },
+                ..PhotonReuseConfig::default()
+            };
+            let mut s = session(scene, config, 11, &device);
+            let first = stats(&s.tick().unwrap());
+            assert_eq!((first.distribution_cells, first.memory.distribution_maps), (0, 0), "{name}");
+            let rotation = if name == "point" { [0.0, 0.0, 0.0, 1.0] } else { DOWN };
+            let scale = if name == "rect" { [0.3, 0.3, 1.0] } else { [1.0; 3] };
+            s.queue_edits(vec![move_light("lamp", trs([0.35, 0.3, -0.2], rotation, scale))]).unwrap();
+            let moved = stats(&s.tick().unwrap());
+            eprintln!("{name}: at the move {moved:?}");
+            assert!(moved.pruned > 0 && moved.filled > 0, "{name}: the move left the map untouched");
+            let dof = moved.distribution_cells as f64 - 1.0;
+            let critical = ChiSquared::new(dof).unwrap().inverse_cdf(0.99);
+            let mut chi2 = Vec::new();
+            for _ in 0..8 {
+                chi2.push(stats(&s.tick().unwrap()).distribution_chi2);
+            }
+            eprintln!("{name}: χ² over 8 ticks {chi2:?} (critical {critical:.0}, dof {dof})");
+            assert!(chi2[7] < critical, "{name}: DM_C did not converge: χ² {chi2:?}");
+            assert!(moved.memory.distribution_maps > 0, "{name}");
+        });
+    }
+}
+
+#[test]
+fn error_mode_never_traces_more_rays_than_naive() {
+    // Property: on the same animation with the same seed, error mode's verification rays plus
+    // its retraced segments never outnumber naive mode's retraced segments, tick by tick.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    let anim = Animation::load(&scenes_dir().join("bunnies-1.anim.json")).unwrap();
+    let run = |reuse: ReuseMode| {
+        pool.install(|| {
+            let mut scene = load("bunnies-1.json");
+            scene.set_resolution(16, 16);
+            let mut s = session(scene, PhotonReuseConfig { paths: 100_000, reuse, ..Default::default() }, 5, &device);
+            (0..8)
+                .map(|i| {
+                    s.queue_edits(anim.edits_at(i as f32 / 10.0)).unwrap();
+                    stats(&s.tick().unwrap()).photon_rays()
+                })
+                .collect::<Vec<u64>>()
+        })
+    };
+    let (naive, error) = (run(ReuseMode::Naive), run(ReuseMode::Error));
+    eprintln!("rays per tick: naive {naive:?}, error {error:?}");
+    assert_eq!(naive[0], error[0], "the first tick traces the same paths");
+    for t in 1..naive.len() {
+        assert!(naive[t] > 0, "tick {t}: nothing moved?");
+        assert!(error[t] <= naive[t], "tick {t}: error traced {} rays, naive {}", error[t], naive[t]);
+    }
+}
+
+#[test]
+fn error_mode_keeps_the_initial_energies_over_ten_thousand_ticks() {
+    // Property: energies are always compared with E_O, the stored ones, and kept untouched when
+    // close, so nothing drifts. A floor slides back and forth in its own plane under a spot
+    // light for 10,000 ticks: every path ending on it or leaving it is re-verified with rays
+    // each tick, none is retraced, and the gathered flux equals the initial one bit for bit.
+    let scene = scene_from(json!({
+        "camera": {"position": [0, 1, -1], "look_at": [0, 0, 0], "vfov_deg": 60, "resolution": [4, 4]},
+        "materials": {"white": {"type": "diffuse", "reflectance": [0.7, 0.7, 0.7]}},
+        "objects": [
+            {"name": "floor", "shape": {"type": "quad"}, "material": "white", "dynamic": true,
+             "transform": {"rotation": UP, "scale": [50, 50, 1]}},
+            {"name": "ceiling", "shape": {"type": "quad"}, "material": "white",
+             "transform": {"translation": [0, 2, 0], "rotation": DOWN, "scale": [50, 50, 1]}}
+        ],
+        "lights": [{"name": "spot", "emitter": {"type": "spot", "intensity": [5, 5, 5], "cone_deg": 25},
+                    "transform": {"translation": [0, 1, 0], "rotation": DOWN}}]
+    }));
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    pool.install(|| {
+        let config = PhotonReuseConfig { paths: 300, reuse: ReuseMode::Error, ..PhotonReuseConfig::default() };
+        let mut s = session(scene, config, 8, &device);
+        let initial = stats(&s.tick().unwrap());
+        assert!(initial.grid_power[1] > 0.0);
+        let (mut verify_rays, mut retraced) = (0u64, 0u64);
+        let mut last = initial.clone();
+        for tick in 1..=10_000u32 {
+            let x = if tick % 2 == 1 { 0.01 } else { 0.0 };
+            s.queue_edits(vec![Edit::Object {
+                name: "floor".into(),
+                transform: trs([x, 0.0, 0.0], UP, [50.0, 50.0, 1.0]),
+            }])
+            .unwrap();
+            last = stats(&s.tick().unwrap());
+            verify_rays += last.verify_rays;
+            retraced += last.partly_retraced + last.fully_retraced;
+        }
+        eprintln!("10,000 ticks: {verify_rays} verification rays, {retraced} paths retraced");
+        assert!(verify_rays > 10_000, "the moving floor was not re-verified");
+        assert_eq!(retraced, 0);
+        assert_eq!(last.grid_power, initial.grid_power);
+        assert_eq!(last.grid_photons, initial.grid_photons);
+    });
+}
+
+#[test]
+fn every_mode_matches_the_path_reference_after_a_block_moves() {
+    // Property: after the Cornell box's short block moves, every reuse mode converges to the
+    // path tracer's image of the moved scene: channel means within 3.5% and 4×4 block means
+    // within 12% (the disc kernel's blur and B = 7 truncation cost about 1.5% here).
+    let root = scenes_dir();
+    let mut desc = load("cornell-box.json").desc().clone();
+    for o in desc.objects.iter_mut().filter(|o| o.name == "short-block") {
+        o.dynamic = true;
+    }
+    desc.camera.resolution = [32, 32];
+    let scene = Scene::from_desc(desc, &root, &root).unwrap();
+    let nudge =
+        Edit::Object { name: "short-block".into(), transform: trs([-60.0, 0.0, 40.0], [0.0, 0.0, 0.0, 1.0], [1.0; 3]) };
+    let mut moved = scene.clone();
+    relume::scene::edits::apply(&mut moved, vec![nudge.clone()]).unwrap();
+    let reference = render(moved, TechniqueConfig::Path(path(128)), 3, 1, 2).image;
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    for reuse in [ReuseMode::Off, ReuseMode::Naive, ReuseMode::Error] {
+        let image = pool.install(|| {
+            let config = PhotonReuseConfig { paths: 250_000, reuse, ..PhotonReuseConfig::default() };
+            let mut s = session(scene.clone(), config, 21, &device);
+            s.tick().unwrap();
+            s.queue_edits(vec![nudge.clone()]).unwrap();
+            let mut last = s.tick().unwrap();
+            for _ in 0..15 {
+                last = s.tick().unwrap();
+            }
+            last.image
+        });
+        assert_finite_non_negative(&image);
+        let (a, b) = (image.mean(), reference.mean());
+        eprintln!("{reuse:?}: photon_reuse {a:?} path {b:?}");
+        for (x, y) in a.to_array().iter().zip(b.to_array()) {
+            assert!((x - y).abs() < 0.035 * y, "{reuse:?}: channel {x} vs {y}");
+        }
+        let block = |img: &relume::film::LinearImage, bx: u32, by: u32| {
+            let mut s = 0.0f64;
+            for y in by * 8..(by + 1) * 8 {
+                for x in bx * 8..(bx + 1) * 8 {
+                    s += img.get(x, y).luminance() as f64;
+                }
+            }
+            s / 64.0
+        };
+        for by in 0..4 {
+            for bx in 0..4 {
+                let (p, r) = (block(&image, bx, by), block(&reference, bx, by));
+                assert!((p - r).abs() < 0.12 * r + 0.003, "{reuse:?} block ({bx},{by}): {p} vs {r}");
+            }
+        }
+    }
+}
