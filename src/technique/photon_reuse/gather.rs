@@ -16,6 +16,7 @@ use crate::film::PixelAccum;
 use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
 use crate::technique::nee::sample_next_event;
 use glam::{IVec3, Vec3};
+use rayon::prelude::*;
 
 /// Longest specular chain a camera ray follows before it gives up.
 const MAX_SPECULAR_CHAIN: u32 = 16;
@@ -53,30 +54,32 @@ fn bucket(c: IVec3, mask: u64) -> usize {
 }
 
 impl PhotonGrid {
-    /// Gathers every photon from row 1 on that lies on a diffuse surface.
+    /// Gathers every photon from row 1 on that lies on a diffuse surface. Rows are read in
+    /// parallel and keyed in parallel; the order (row, then path) and so the grid are the same
+    /// whatever the thread count.
     pub fn build(scene: &Scene, store: &PathStore, radius: f32) -> PhotonGrid {
+        let diffuse: Vec<bool> =
+            scene.objects.iter().map(|o| !scene.materials[o.material as usize].is_specular()).collect();
         let mut photons = Vec::new();
         for (row_index, row) in store.rows.iter().enumerate().skip(1) {
-            for path in 0..store.paths {
-                if (store.word[path].photons() as usize) <= row_index {
-                    continue;
-                }
-                let object = row.object[path] as usize;
-                if scene.materials[scene.objects[object].material as usize].is_specular() {
-                    continue;
-                }
-                photons.push(GridPhoton {
+            let gathered: Vec<GridPhoton> = (0..store.paths)
+                .into_par_iter()
+                .filter(|&path| {
+                    store.word[path].photons() as usize > row_index && diffuse[row.object[path] as usize]
+                })
+                .map(|path| GridPhoton {
                     position: row.position[path],
                     towards_source: -row.incoming[path],
                     power: row.power[path],
-                });
-            }
+                })
+                .collect();
+            photons.extend(gathered);
         }
         let inv_cell = 1.0 / (2.0 * radius);
         let table = (photons.len().max(1) * 2).next_power_of_two();
         let mask = table as u64 - 1;
         // Counting sort by bucket.
-        let keys: Vec<usize> = photons.iter().map(|p| bucket(cell_of(p.position, inv_cell), mask)).collect();
+        let keys: Vec<usize> = photons.par_iter().map(|p| bucket(cell_of(p.position, inv_cell), mask)).collect();
         let mut starts = vec![0u32; table + 1];
         for &k in &keys {
             starts[k + 1] += 1;

@@ -10,7 +10,7 @@ use super::store::PathStore;
 use super::trace::{path_origin, Retrace};
 use crate::scene::edits::Aabb;
 use crate::scene::{Material, Scene};
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 /// A bounding-volume hierarchy over the moved boxes: a segment that misses a node's bounds
 /// skips all the boxes below it. Built by median split on the longest axis of the centroids.
@@ -77,6 +77,19 @@ impl BoxTree {
         if self.nodes.is_empty() {
             return (false, 0);
         }
+        // With no zero component the reciprocal direction serves every box; otherwise the exact
+        // per-axis test handles the parallel slabs.
+        let fast = dir.x != 0.0 && dir.y != 0.0 && dir.z != 0.0;
+        let (o, inv) = (Vec3A::from(origin), Vec3A::ONE / Vec3A::from(dir));
+        let touches = |b: &Aabb| {
+            if fast {
+                let t0 = (Vec3A::from(b.min) - o) * inv;
+                let t1 = (Vec3A::from(b.max) - o) * inv;
+                t0.min(t1).max_element().max(0.0) <= t0.max(t1).min_element().min(t_max)
+            } else {
+                segment_hits_box(origin, dir, t_max, b)
+            }
+        };
         let mut stack = [0u32; 64];
         let mut top = 1;
         let mut tests = 0u64;
@@ -86,14 +99,14 @@ impl BoxTree {
             // A leaf's own boxes are as cheap to test as its bounds, so only inner nodes cull.
             if n.count == 0 {
                 tests += 1;
-                if !segment_hits_box(origin, dir, t_max, &n.bounds) {
+                if !touches(&n.bounds) {
                     continue;
                 }
             }
             if n.count > 0 {
                 for b in &self.boxes[n.first as usize..(n.first + n.count) as usize] {
                     tests += 1;
-                    if segment_hits_box(origin, dir, t_max, b) {
+                    if touches(b) {
                         return (true, tests);
                     }
                 }
