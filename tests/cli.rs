@@ -176,7 +176,7 @@ fn bench_reuse_reports_each_mode_with_the_named_fields() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
     let modes = v["modes"].as_array().unwrap();
-    assert_eq!(modes.iter().map(|m| m["mode"].as_str().unwrap()).collect::<Vec<_>>(), ["off", "naive"]);
+    assert_eq!(modes.iter().map(|m| m["mode"].as_str().unwrap()).collect::<Vec<_>>(), ["off", "naive", "error"]);
     for m in modes {
         assert_eq!(m["frames"].as_array().unwrap().len(), 3, "frame 0 is reported as initial");
         let f = &m["frames"][0];
@@ -185,7 +185,12 @@ fn bench_reuse_reports_each_mode_with_the_named_fields() {
             assert!(m["summary"][key].is_number(), "summary.{key}");
         }
     }
-    // A bouncing bunny touches only some paths: naive traces fewer photon rays than off.
+    // A bouncing bunny touches only some paths: naive traces fewer photon rays than off, and
+    // error mode no more than naive.
     let rays = |i: usize| modes[i]["summary"]["rays_per_tick_median"].as_f64().unwrap();
     assert!(rays(1) < rays(0), "naive {} vs off {}", rays(1), rays(0));
+    assert!(rays(2) <= rays(1), "error {} vs naive {}", rays(2), rays(1));
+    for stage in ["origins_and_dm", "verify", "prune", "fill", "trace", "grid", "render"] {
+        assert!(modes[2]["frames"][0]["stages_ms"][stage].is_f64(), "stage {stage}");
+    }
 }

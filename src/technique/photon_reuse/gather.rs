@@ -64,9 +64,7 @@ impl PhotonGrid {
         for (row_index, row) in store.rows.iter().enumerate().skip(1) {
             let gathered: Vec<GridPhoton> = (0..store.paths)
                 .into_par_iter()
-                .filter(|&path| {
-                    store.word[path].photons() as usize > row_index && diffuse[row.object[path] as usize]
-                })
+                .filter(|&path| store.word[path].photons() as usize > row_index && diffuse[row.object[path] as usize])
                 .map(|path| GridPhoton {
                     position: row.position[path],
                     towards_source: -row.incoming[path],

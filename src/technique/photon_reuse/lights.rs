@@ -122,7 +122,7 @@ pub fn apply_moved(store: &mut PathStore, path: usize, origin: Vec3, dir: Vec3, 
         origins[path] = origin;
     }
     store.emit_dir[path] = dir;
-    store.word[path] = store.word[path].with_cell(cell);
+    store.word[path] = store.word[path].with_cell(cell).with_reused_light(true);
     if store.word[path].photons() > 0 {
         store.rows[0].incoming[path] = dir;
     }

@@ -149,6 +149,10 @@ impl PhotonReuse {
     /// Traces the given retraces in parallel, in chunks that bound temporary memory; fills and
     /// the rest are timed and counted apart.
     fn retrace(&mut self, ctx: &RenderContext, store: &mut PathStore, work: &[(usize, Retrace)]) {
+        // Mark first (§4's replace flag and segment), so what is pending is visible in the word.
+        for &(path, how) in work {
+            store.word[path] = store.word[path].retrace(how.first_segment());
+        }
         let frames: Vec<Option<&EmissionFrame>> = self.maps.iter().map(|m| m.as_ref().map(|m| &m.frame)).collect();
         let tracer = Tracer {
             scene: ctx.scene,

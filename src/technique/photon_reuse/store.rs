@@ -86,6 +86,11 @@ impl PathWord {
     pub fn cleared(self) -> PathWord {
         PathWord(self.0 & !Self::REPLACE_BIT)
     }
+    /// Sets or clears the reuse-light flag: the path kept its light sample (origin and
+    /// direction) when its light moved.
+    pub fn with_reused_light(self, reused: bool) -> PathWord {
+        PathWord((self.0 & !Self::REUSE_LIGHT_BIT) | if reused { Self::REUSE_LIGHT_BIT } else { 0 })
+    }
 }
 
 /// All resident paths.
@@ -183,6 +188,8 @@ mod tests {
         let w = w.with_cell((1 << 22) - 1);
         assert_eq!((w.cell(), w.photons(), w.retrace_from()), ((1 << 22) - 1, 15, 3));
         assert_eq!(PathWord(0).with_photons(99).photons(), 15);
+        let w = w.with_reused_light(true);
+        assert!(w.reuse_light() && w.with_reused_light(false).0 == w.0 & !(1 << 31));
     }
 
     #[test]

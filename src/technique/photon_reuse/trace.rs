@@ -44,6 +44,16 @@ pub enum Retrace {
     Fill(u32),
 }
 
+impl Retrace {
+    /// The first segment this retrace rewrites (the path word's "retrace from" field).
+    pub fn first_segment(self) -> u32 {
+        match self {
+            Retrace::Emit | Retrace::Fill(_) => 0,
+            Retrace::KeepSegment(k) | Retrace::FreshFrom(k) | Retrace::Redirect(k) => k,
+        }
+    }
+}
+
 /// The new tail of a path, computed in parallel and written back afterwards.
 #[derive(Clone, Debug)]
 pub struct TracedTail {
@@ -235,7 +245,9 @@ pub fn write_back(store: &mut PathStore, tails: Vec<TracedTail>) {
         if let Some(c) = t.cell {
             store.word[i] = store.word[i].with_cell(c);
         }
+        debug_assert!(store.word[i].replace(), "path {i} traced without being marked");
         if let Some((o, d, p)) = t.emission {
+            store.word[i] = store.word[i].with_reused_light(false);
             if let Some(origins) = &mut store.origin {
                 origins[i] = o;
             }
