@@ -9,7 +9,7 @@ COPY . .
 RUN cargo build --release --locked
 
 FROM debian:bookworm-slim
-RUN apt-get update && apt-get install -y --no-install-recommends libembree3-3 ca-certificates \
+RUN apt-get update && apt-get install -y --no-install-recommends libembree3-3 libfontconfig1 fonts-dejavu-core ca-certificates \
     && rm -rf /var/lib/apt/lists/*
 COPY --from=build /src/target/release/relume /usr/local/bin/relume
 COPY --from=build /src/scenes /usr/share/relume/scenes

@@ -5,11 +5,12 @@
 //! - `relume render SCENE.json --anim NAME.anim.json --frames N --out DIR/`
 //! - `relume bench rays SCENE.json [--json FILE]`
 //! - `relume bench reuse SCENE.json --anim NAME.anim.json --frames F [--paths N] [--json FILE]`
+//! - `relume bench error SCENE.json [--anim NAME.anim.json --frames F --every K] --techniques LIST [--ref-spp S] [--out DIR]`
 //! - `relume load --url URL --scene NAME --anim NAME.anim.json --sessions N --hz H --duration 60s`
 //!
 //! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
 use clap::{Parser, Subcommand};
-use relume::tools::{bench, bench_reuse, load, render, serve};
+use relume::tools::{bench, bench_error, bench_reuse, load, render, serve};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -42,8 +43,11 @@ enum Command {
 enum BenchCommand {
     /// Raw Embree throughput and the path tracer's ray rate, with and without path regeneration.
     Rays(bench::RaysArgs),
-    /// Photon path reuse modes (off, naive) over the same animation.
+    /// Photon path reuse modes (off, naive, error) over the same animation.
     Reuse(bench_reuse::ReuseArgs),
+    /// Speed against error: technique configurations against converged `path` references,
+    /// with CSV, JSON, a Markdown report and plots.
+    Error(bench_error::ErrorArgs),
 }
 
 fn main() -> ExitCode {
@@ -58,6 +62,7 @@ fn main() -> ExitCode {
         Command::Load(args) => load::run(args),
         Command::Bench { which: BenchCommand::Rays(args) } => bench::rays(args),
         Command::Bench { which: BenchCommand::Reuse(args) } => bench_reuse::run(args),
+        Command::Bench { which: BenchCommand::Error(args) } => bench_error::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -194,3 +194,64 @@ fn bench_reuse_reports_each_mode_with_the_named_fields() {
         assert!(modes[2]["frames"][0]["stages_ms"][stage].is_f64(), "stage {stage}");
     }
 }
+
+#[test]
+fn bench_error_writes_its_files_and_reuses_cached_references() {
+    let out = out_dir("error");
+    let cache = out.join("cache");
+    let run = || {
+        relume()
+            .args(["bench", "error", scene("cornell-box.json").to_str().unwrap()])
+            .args(["--width", "16", "--height", "16", "--frames", "3", "--every", "2", "--ref-spp", "16"])
+            .args(["--repeats", "2", "--threads", "1", "--techniques", "path:spp=2,photon_reuse:naive:paths=3000"])
+            .arg("--out")
+            .arg(out.join("report"))
+            .arg("--cache")
+            .arg(&cache)
+            .output()
+            .unwrap()
+    };
+    let first = run();
+    assert!(first.status.success(), "{}", String::from_utf8_lossy(&first.stderr));
+    let refs: Vec<_> = std::fs::read_dir(&cache).unwrap().map(|e| e.unwrap().path()).collect();
+    let exr = refs.iter().find(|p| p.extension().is_some_and(|e| e == "exr")).expect("a cached reference");
+    let stamp = std::fs::metadata(exr).unwrap().modified().unwrap();
+    let second = run();
+    assert!(second.status.success());
+    assert_eq!(std::fs::metadata(exr).unwrap().modified().unwrap(), stamp, "the reference was rendered again");
+    for file in [
+        "results.csv",
+        "results.json",
+        "report.md",
+        "time_vs_error.png",
+        "time_vs_error.svg",
+        "rays_per_frame.png",
+        "rays_per_frame.svg",
+        "stage_times.png",
+        "stage_times.svg",
+        "errors/path_spp_2.png",
+        "errors/photon_reuse_naive.png",
+    ] {
+        let p = out.join("report").join(file);
+        assert!(std::fs::metadata(&p).is_ok_and(|m| m.len() > 0), "{} missing", p.display());
+    }
+    let csv = std::fs::read_to_string(out.join("report/results.csv")).unwrap();
+    assert!(csv.starts_with("config,frame,time_s,tick_ms,"), "{csv}");
+    assert_eq!(csv.lines().count(), 1 + 2 * 3, "a row per configuration and frame");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report/results.json")).unwrap()).unwrap();
+    let summaries = v["summaries"].as_array().unwrap();
+    assert_eq!(summaries.len(), 2);
+    assert!(summaries.iter().any(|s| s["pareto"] == true));
+    for s in summaries {
+        let flip = s["flip_hdr"].as_f64().unwrap();
+        assert!(flip > 0.0 && flip < 1.0, "{s}");
+    }
+    // A bad spec is a usage error naming what is wrong.
+    let bad = relume()
+        .args(["bench", "error", scene("cornell-box.json").to_str().unwrap(), "--techniques", "path:warp=9"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown field `warp`"));
+}

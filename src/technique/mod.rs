@@ -8,6 +8,7 @@
 pub mod nee;
 pub mod path;
 pub mod photon_reuse;
+mod spec;
 
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -71,6 +72,20 @@ pub enum TechniqueStats {
     PhotonReuse(Box<photon_reuse::PhotonStats>),
 }
 
+/// The ids [`TechniqueConfig`] accepts.
+pub const TECHNIQUE_IDS: &[&str] = &["path", "photon_reuse"];
+
+impl TechniqueStats {
+    /// Bytes the technique keeps resident between ticks (its light-transport state; the film
+    /// is the engine's).
+    pub fn memory_bytes(&self) -> u64 {
+        match self {
+            TechniqueStats::Path(_) => 0,
+            TechniqueStats::PhotonReuse(s) => s.memory.total() + s.grid_bytes,
+        }
+    }
+}
+
 /// Which technique to run, with its parameters. JSON: `{"id": "path", "spp": 4, ...}`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "id", rename_all = "snake_case")]
@@ -92,6 +107,14 @@ impl TechniqueConfig {
         match self {
             TechniqueConfig::Path(c) => c.spp,
             TechniqueConfig::PhotonReuse(c) => c.spp,
+        }
+    }
+
+    /// Checks every parameter, naming the first one at fault.
+    pub fn validate(&self) -> Result<(), TechniqueError> {
+        match self {
+            TechniqueConfig::Path(c) => c.validate(),
+            TechniqueConfig::PhotonReuse(c) => c.validate(),
         }
     }
 

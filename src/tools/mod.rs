@@ -1,6 +1,7 @@
 //! Command-line tools built on the library: rendering, benchmarks and the server's entry point. These use `anyhow`, as
 //! binaries do; the library modules below them return typed errors.
 pub mod bench;
+pub mod bench_error;
 pub mod bench_reuse;
 pub mod load;
 pub mod render;

@@ -6,8 +6,6 @@ use crate::engine::{thread_pool, Frame, Session};
 use crate::film::{write_image, ImageFormat};
 use crate::scene::animation::Animation;
 use crate::scene::Scene;
-use crate::technique::path::PathConfig;
-use crate::technique::photon_reuse::PhotonReuseConfig;
 use crate::technique::TechniqueConfig;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -17,7 +15,7 @@ use std::path::PathBuf;
 pub struct RenderArgs {
     #[command(flatten)]
     pub target: SceneArgs,
-    /// Technique id.
+    /// Technique spec: `path`, `photon_reuse:error@0.001`, `photon_reuse:naive:paths=200000`...
     #[arg(long, default_value = "path")]
     pub technique: String,
     /// Samples per pixel: for a still, the total; for an animation, per frame.
@@ -42,13 +40,16 @@ pub struct RenderArgs {
     pub format: String,
 }
 
-/// The technique configuration for a CLI technique id, with `spp` paths per pixel per tick.
-pub fn technique_config(id: &str, spp: u32) -> Result<TechniqueConfig> {
-    match id {
-        "path" => Ok(TechniqueConfig::Path(PathConfig { spp, ..PathConfig::default() })),
-        "photon_reuse" => Ok(TechniqueConfig::PhotonReuse(PhotonReuseConfig { spp, ..PhotonReuseConfig::default() })),
-        other => Err(UsageError(format!("unknown technique '{other}' (available: path, photon_reuse)")).into()),
+/// The technique configuration for a CLI technique spec (`ID[:VARIANT][@VALUE][:KEY=VALUE]...`,
+/// parsed like the service's JSON), with `spp` paths per pixel per tick.
+pub fn technique_config(spec: &str, spp: u32) -> Result<TechniqueConfig> {
+    let mut config = TechniqueConfig::from_spec(spec).map_err(|e| UsageError(format!("--technique: {e}")))?;
+    match &mut config {
+        TechniqueConfig::Path(c) => c.spp = spp,
+        TechniqueConfig::PhotonReuse(c) => c.spp = spp,
     }
+    config.validate().map_err(|e| UsageError(format!("--technique: {e}")))?;
+    Ok(config)
 }
 
 pub fn load_scene(path: &std::path::Path, width: Option<u32>, height: Option<u32>) -> Result<Scene> {

@@ -475,8 +475,13 @@ impl Technique for PhotonReuse {
         stats.grid_photons = self.grid.len() as u64;
         stats.grid_power = self.grid.power;
         stats.grid_bytes = self.grid.memory_bytes();
-        let counts =
-            RayCounts { primary: rays.camera, secondary: rays.specular + stats.retrace_rays, shadow: rays.shadow };
+        // Photon rays count by query: closest-hit (verification, retraces, fills) as secondary,
+        // occlusion (primary-segment checks of moved lights) as shadow rays.
+        let counts = RayCounts {
+            primary: rays.camera,
+            secondary: rays.specular + stats.verify_rays + stats.retrace_rays + stats.fill_rays,
+            shadow: rays.shadow + stats.origin_rays,
+        };
         Ok(RenderStats { rays: counts, detail: TechniqueStats::PhotonReuse(Box::new(stats)) })
     }
 }

@@ -1,0 +1,254 @@
+//! `relume bench error`: speed against error. Each technique configuration runs the same
+//! scene (and animation) with the same seed; every K-th frame is compared with a converged
+//! `path` reference (`reference.rs`) by relMSE, RMSE, PSNR and FLIP (`metrics.rs`). Tick times
+//! are the median of `--repeats` runs. Results go to DIR as CSV, JSON, a Markdown report, plots
+//! (`plots.rs`) and false-colour FLIP maps of each configuration's worst frame (`report.rs`).
+mod metrics;
+mod plots;
+mod reference;
+mod report;
+
+use super::render::load_scene;
+use super::{SceneArgs, UsageError};
+use crate::embree::Device;
+use crate::engine::{thread_pool, Session};
+use crate::scene::animation::Animation;
+use crate::technique::TechniqueConfig;
+use anyhow::{Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use metrics::ImageError;
+use reference::{Reference, ReferenceKey};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct ErrorArgs {
+    #[command(flatten)]
+    pub target: SceneArgs,
+    /// Technique specs, comma-separated: `photon_reuse:off,photon_reuse:error@0.001,path:spp=4`.
+    #[arg(long, default_value = "path:spp=1,photon_reuse:off,photon_reuse:naive,photon_reuse:error@0.001")]
+    pub techniques: String,
+    /// Animation to play (NAME.anim.json); without it the scene is static and the frames are
+    /// successive ticks accumulating.
+    #[arg(long)]
+    pub anim: Option<PathBuf>,
+    #[arg(long, default_value_t = 16)]
+    pub frames: u32,
+    /// Compare every K-th frame with a reference (frame 0 included).
+    #[arg(long, default_value_t = 4)]
+    pub every: u32,
+    /// Animation frames per second.
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
+    /// Samples per pixel of the `path` references. The default keeps the references' own
+    /// relMSE (estimated and reported) one to two orders of magnitude below the errors measured.
+    #[arg(long, default_value_t = 1024)]
+    pub ref_spp: u32,
+    /// Runs per configuration; tick times are their median.
+    #[arg(long, default_value_t = 3)]
+    pub repeats: u32,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Output folder.
+    #[arg(long, default_value = "bench-error")]
+    pub out: PathBuf,
+    /// Where references are cached.
+    #[arg(long, default_value = ".relume-cache/references")]
+    pub cache: PathBuf,
+}
+
+/// One frame of one configuration.
+#[derive(Clone, Debug, Serialize)]
+pub struct FrameResult {
+    pub config: String,
+    pub frame: u32,
+    pub time_s: f32,
+    /// Median over the repeats.
+    pub tick_ms: f64,
+    pub stages_ms: BTreeMap<&'static str, f64>,
+    pub rays: u64,
+    pub memory_bytes: u64,
+    /// Against the reference, on measured frames only.
+    pub error: Option<ImageError>,
+}
+
+/// A configuration's summary: medians of times and rays, means of errors.
+#[derive(Clone, Debug, Serialize)]
+pub struct ConfigSummary {
+    pub config: String,
+    pub tick_ms_median: f64,
+    pub rays_per_frame_median: f64,
+    pub rel_mse: f64,
+    pub rmse: f64,
+    pub psnr_db: f64,
+    pub flip_ldr: f64,
+    pub flip_hdr: f64,
+    pub stages_ms_median: BTreeMap<&'static str, f64>,
+    /// The measured frame with the largest HDR-FLIP.
+    pub worst_frame: u32,
+    pub pareto: bool,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ErrorReport {
+    pub scene: String,
+    pub animation: Option<String>,
+    pub width: u32,
+    pub height: u32,
+    pub threads: usize,
+    pub ref_spp: u32,
+    /// Largest estimated relMSE of a reference's own noise.
+    pub reference_rel_mse: f64,
+    pub summaries: Vec<ConfigSummary>,
+    pub frames: Vec<FrameResult>,
+}
+
+pub fn median(values: &[f64]) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        0.0
+    } else {
+        v[v.len() / 2]
+    }
+}
+
+fn bar(len: u64, unit: &str) -> Result<ProgressBar> {
+    let bar = ProgressBar::new(len);
+    bar.set_style(
+        ProgressStyle::with_template(&format!("{{msg:28}} [{{bar:30}}] {{pos}}/{{len}} {unit} ({{eta}} left)"))?
+            .progress_chars("=> "),
+    );
+    Ok(bar)
+}
+
+pub fn run(args: ErrorArgs) -> Result<()> {
+    if args.frames == 0 || args.every == 0 || args.repeats == 0 || args.ref_spp == 0 {
+        return Err(UsageError("--frames, --every, --repeats and --ref-spp must be at least 1".into()).into());
+    }
+    if !(args.fps > 0.0 && args.fps.is_finite()) {
+        return Err(UsageError("--fps must be a positive number".into()).into());
+    }
+    let configs: Vec<TechniqueConfig> = args
+        .techniques
+        .split(',')
+        .map(|s| TechniqueConfig::from_spec(s.trim()).map_err(|e| UsageError(format!("--techniques: {e}"))))
+        .collect::<Result<_, _>>()?;
+    let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
+    let scene_file = std::fs::read(&args.target.scene)?;
+    let (animation, animation_file) = match &args.anim {
+        Some(p) => {
+            let a = Animation::load(p).map_err(|e| UsageError(format!("{}: {e}", p.display())))?;
+            a.validate(&scene).map_err(|e| UsageError(format!("{}: {e}", p.display())))?;
+            (Some(a), Some(std::fs::read(p)?))
+        }
+        None => (None, None),
+    };
+    let threads = args.target.threads();
+    let pool = thread_pool(threads)?;
+    let device = Device::new(threads).context("creating the Embree device")?;
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+
+    // References for every measured frame (one when the scene is static).
+    let measured: Vec<u32> = (0..args.frames).step_by(args.every as usize).collect();
+    let time_of = |frame: u32| if animation.is_some() { frame as f32 / args.fps } else { 0.0 };
+    let mut times: Vec<f32> = measured.iter().map(|&f| time_of(f)).collect();
+    times.dedup();
+    let refs_bar = bar(times.len() as u64 * (args.ref_spp / 2).max(1) as u64 * 2, "spp")?;
+    refs_bar.set_message("references (path)");
+    let mut references: Vec<(f32, Reference)> = Vec::new();
+    pool.install(|| -> Result<()> {
+        for &time in &times {
+            let key = ReferenceKey {
+                scene_file: &scene_file,
+                animation_file: animation_file.as_deref(),
+                time,
+                width: scene.camera.width,
+                height: scene.camera.height,
+                spp: args.ref_spp,
+                seed: args.seed,
+            };
+            let (r, _) = reference::reference(&args.cache, &key, &scene, animation.as_ref(), &device, &refs_bar)?;
+            references.push((time, r));
+        }
+        Ok(())
+    })?;
+    refs_bar.finish_and_clear();
+    let reference_at = |time: f32| references.iter().find(|(t, _)| *t == time).map(|(_, r)| r);
+
+    // Every configuration, repeated; errors from the first run (the seed makes them the same).
+    let run_bar = bar(configs.len() as u64 * args.repeats as u64 * args.frames as u64, "frames")?;
+    let mut frames: Vec<FrameResult> = Vec::new();
+    let mut error_maps: BTreeMap<String, (u32, f64, Vec<u8>)> = BTreeMap::new();
+    for config in &configs {
+        let label = config.label();
+        run_bar.set_message(label.clone());
+        let mut runs: Vec<Vec<FrameResult>> = Vec::new();
+        for repeat in 0..args.repeats {
+            let mut session = Session::new(scene.clone(), config, args.seed, &device)?;
+            let mut run = Vec::new();
+            pool.install(|| -> Result<()> {
+                for frame in 0..args.frames {
+                    let time = time_of(frame);
+                    if let Some(a) = &animation {
+                        session.queue_edits(a.edits_at(time))?;
+                    }
+                    let f = session.tick()?;
+                    let t = &f.stats.times;
+                    let error = match (repeat, frame % args.every == 0, reference_at(time)) {
+                        (0, true, Some(r)) => {
+                            let (e, map) = metrics::compare(&f.image, &r.image);
+                            let worst = error_maps.get(&label).map_or(-1.0, |w| w.1);
+                            if e.flip_hdr > worst {
+                                error_maps.insert(label.clone(), (frame, e.flip_hdr, metrics::false_colour(&map)));
+                            }
+                            Some(e)
+                        }
+                        _ => None,
+                    };
+                    run.push(FrameResult {
+                        config: label.clone(),
+                        frame,
+                        time_s: time,
+                        tick_ms: t.total_ms,
+                        stages_ms: BTreeMap::from([
+                            ("apply_commit", t.drain_ms + t.apply_ms + t.commit_ms),
+                            ("update", t.update_ms),
+                            ("render", t.render_ms),
+                            ("resolve", t.resolve_ms),
+                        ]),
+                        rays: f.stats.rays.total(),
+                        memory_bytes: f.stats.detail.memory_bytes(),
+                        error,
+                    });
+                    run_bar.inc(1);
+                }
+                Ok(())
+            })?;
+            runs.push(run);
+        }
+        frames.extend(report::merge_repeats(runs));
+    }
+    run_bar.finish_and_clear();
+
+    let reference_rel_mse = references.iter().map(|(_, r)| r.self_rel_mse).fold(0.0, f64::max);
+    let summaries = report::summarise(&configs, &frames);
+    let report = ErrorReport {
+        scene: args.target.scene.display().to_string(),
+        animation: args.anim.as_ref().map(|p| p.display().to_string()),
+        width: scene.camera.width,
+        height: scene.camera.height,
+        threads,
+        ref_spp: args.ref_spp,
+        reference_rel_mse,
+        summaries,
+        frames,
+    };
+    let (w, h) = (scene.camera.width, scene.camera.height);
+    report::write_all(&args.out, &report, &error_maps, (w, h))?;
+    plots::write_all(&args.out, &report)?;
+    report::print_table(&report);
+    println!("wrote {}", args.out.display());
+    Ok(())
+}
