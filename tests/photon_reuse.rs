@@ -5,18 +5,11 @@ use relume::embree::Device;
 use relume::engine::Session;
 use relume::scene::edits::Edit;
 use relume::scene::Trs;
-use relume::technique::photon_reuse::{PhotonReuseConfig, PhotonStats, ReuseMode};
-use relume::technique::{TechniqueConfig, TechniqueStats};
+use relume::technique::photon_reuse::{PhotonReuseConfig, ReuseMode};
+use relume::technique::TechniqueConfig;
 
 fn config(paths: u32, reuse: ReuseMode) -> PhotonReuseConfig {
     PhotonReuseConfig { paths, reuse, ..PhotonReuseConfig::default() }
-}
-
-fn stats(frame: &relume::engine::Frame) -> PhotonStats {
-    match &frame.stats.detail {
-        TechniqueStats::PhotonReuse(s) => (**s).clone(),
-        other => panic!("photon_reuse stats expected, got {other:?}"),
-    }
 }
 
 #[test]
@@ -87,10 +80,10 @@ fn a_static_scene_retraces_nothing_after_the_first_tick_and_accumulates() {
     let mut s =
         Session::new(scene, &TechniqueConfig::PhotonReuse(config(20_000, ReuseMode::Naive)), 1, &device).unwrap();
     let first = s.tick().unwrap();
-    assert_eq!(stats(&first).fully_retraced, 20_000);
+    assert_eq!(photon_stats(&first).fully_retraced, 20_000);
     for _ in 0..3 {
         let f = s.tick().unwrap();
-        let st = stats(&f);
+        let st = photon_stats(&f);
         assert_eq!((st.untouched, st.partly_retraced, st.fully_retraced, st.retrace_rays), (20_000, 0, 0, 0));
         assert_eq!(f.accumulation_id, first.accumulation_id);
     }
@@ -98,7 +91,7 @@ fn a_static_scene_retraces_nothing_after_the_first_tick_and_accumulates() {
     // A camera edit restarts the film but retraces no path: photons do not depend on the view.
     s.queue_edits(vec![camera_dolly()]).unwrap();
     let f = s.tick().unwrap();
-    assert_eq!(stats(&f).untouched, 20_000);
+    assert_eq!(photon_stats(&f).untouched, 20_000);
     assert_ne!(f.accumulation_id, first.accumulation_id);
 }
 
@@ -118,7 +111,7 @@ fn naive_mode_retraces_only_what_a_move_touches_and_matches_the_baseline() {
                 Trs { translation: [350.0, 0.0, 250.0], rotation: [0.0, 0.0, 0.0, 1.0], scale: [150.0, 150.0, 150.0] };
             s.queue_edits(vec![Edit::Object { name: "bunny-1".into(), transform: moved }]).unwrap();
             let after = s.tick().unwrap();
-            let st = stats(&after);
+            let st = photon_stats(&after);
             let mut last = after;
             for _ in 0..15 {
                 last = s.tick().unwrap();
@@ -169,11 +162,33 @@ fn only_what_the_scene_uses_is_allocated() {
     let memory = |name: &str| {
         let mut scene = load(name);
         scene.set_resolution(8, 8);
-        stats(&render(scene, TechniqueConfig::PhotonReuse(config(1000, ReuseMode::Naive)), 1, 1, 1)).memory
+        photon_stats(&render(scene, TechniqueConfig::PhotonReuse(config(1000, ReuseMode::Naive)), 1, 1, 1)).memory
     };
     let point = memory("furnace.json");
     let area = memory("cornell-box.json");
     assert_eq!(point.origins, 0);
     assert_eq!(area.origins, 1000 * 12);
     assert_eq!(point.photon_map, area.photon_map);
+    assert_eq!((area.distribution_maps, area.light_slots), (0, 0), "no light moved: no maps");
+
+    // A moving point light gets a 2-D (θ, φ) map, never the 4-D area-light one, and still no
+    // origins. A scene with no dynamic object verifies nothing when only the camera moves.
+    let device = Device::new(1).unwrap();
+    let mut desc = load("furnace.json").desc().clone();
+    desc.lights[0].dynamic = true;
+    desc.camera.resolution = [8, 8];
+    let scene = relume::scene::Scene::from_desc(desc, &scenes_dir(), &scenes_dir()).unwrap();
+    let mut s = Session::new(scene, &TechniqueConfig::PhotonReuse(config(4000, ReuseMode::Error)), 1, &device).unwrap();
+    s.tick().unwrap();
+    s.queue_edits(vec![camera_dolly()]).unwrap();
+    let still = photon_stats(&s.tick().unwrap());
+    assert_eq!((still.verify_box_tests, still.verify_rays, still.origin_rays), (0, 0, 0));
+    assert_eq!((still.memory.distribution_maps, still.memory.light_slots), (0, 0));
+    let moved = Trs { translation: [0.1, 0.0, 0.0], rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0, 1.0, 1.0] };
+    s.queue_edits(vec![Edit::Light { name: "centre".into(), transform: Some(moved), emitter: None }]).unwrap();
+    let m = photon_stats(&s.tick().unwrap());
+    let cells = relume::technique::photon_reuse::MapResolution::default().direction.iter().product::<u32>() as u64;
+    assert_eq!(m.distribution_cells, cells, "a point light's map is 2-D");
+    assert_eq!(m.memory.distribution_maps, cells * 8);
+    assert_eq!(m.memory.origins, 0);
 }

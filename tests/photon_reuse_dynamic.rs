@@ -3,26 +3,14 @@
 mod common;
 use common::*;
 use relume::embree::Device;
-use relume::engine::{thread_pool, Frame, Session};
+use relume::engine::{thread_pool, Session};
 use relume::scene::animation::Animation;
 use relume::scene::edits::Edit;
-use relume::scene::{Scene, SceneDesc, Trs};
-use relume::technique::photon_reuse::{PhotonReuseConfig, PhotonStats, ReuseMode};
-use relume::technique::{TechniqueConfig, TechniqueStats};
+use relume::scene::{Scene, Trs};
+use relume::technique::photon_reuse::{PhotonReuseConfig, ReuseMode};
+use relume::technique::TechniqueConfig;
 use serde_json::json;
 use statrs::distribution::{ChiSquared, ContinuousCDF};
-
-fn stats(frame: &Frame) -> PhotonStats {
-    match &frame.stats.detail {
-        TechniqueStats::PhotonReuse(s) => (**s).clone(),
-        other => panic!("photon_reuse stats expected, got {other:?}"),
-    }
-}
-
-fn scene_from(v: serde_json::Value) -> Scene {
-    let desc: SceneDesc = serde_json::from_value(v).expect("scene JSON");
-    Scene::from_desc(desc, &scenes_dir(), &scenes_dir()).expect("valid scene")
-}
 
 fn session(scene: Scene, config: PhotonReuseConfig, seed: u64, device: &Device) -> Session {
     Session::new(scene, &TechniqueConfig::PhotonReuse(config), seed, device).expect("session")
@@ -41,7 +29,7 @@ fn move_light(name: &str, transform: Trs) -> Edit {
 
 /// A floor under a slab that spans the whole room, lit by a dynamic rect light below the slab.
 fn slab_room() -> Scene {
-    scene_from(json!({
+    scene_from_json(json!({
         "camera": {"position": [0, 1, -2.5], "look_at": [0, 0, 0], "vfov_deg": 60, "resolution": [16, 16]},
         "materials": {"white": {"type": "diffuse", "reflectance": [0.8, 0.8, 0.8]}},
         "objects": [
@@ -71,7 +59,7 @@ fn a_light_moved_above_a_slab_leaks_no_light_below_it() {
             assert!(lit.g > 0.01, "{reuse:?}: the floor should be lit first: {lit:?}");
             s.queue_edits(vec![move_light("panel", trs([0.0, 2.6, 0.0], DOWN, [0.25, 0.25, 1.0]))]).unwrap();
             let moved = s.tick().unwrap();
-            let st = stats(&moved);
+            let st = photon_stats(&moved);
             assert!(st.origin_rays > 0, "{reuse:?}: no primary segment was verified: {st:?}");
             assert!(st.partly_retraced + st.fully_retraced > 0);
             for _ in 0..3 {
@@ -86,7 +74,7 @@ fn a_light_moved_above_a_slab_leaks_no_light_below_it() {
 
 /// A dynamic light of the given emitter inside a closed unit sphere.
 fn sphere_with(emitter: serde_json::Value, rotation: [f32; 4], scale: [f32; 3]) -> Scene {
-    scene_from(json!({
+    scene_from_json(json!({
         "camera": {"position": [0, 0, 0.5], "look_at": [0, 0, -1], "vfov_deg": 60, "resolution": [8, 8]},
         "materials": {"half": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
         "objects": [{"name": "sphere", "shape": {"type": "sphere", "segments": 64}, "material": "half"}],
@@ -119,19 +107,19 @@ fn distribution_maps_converge_to_their_targets_after_a_light_stops() {
                 ..PhotonReuseConfig::default()
             };
             let mut s = session(scene, config, 11, &device);
-            let first = stats(&s.tick().unwrap());
+            let first = photon_stats(&s.tick().unwrap());
             assert_eq!((first.distribution_cells, first.memory.distribution_maps), (0, 0), "{name}");
             let rotation = if name == "point" { [0.0, 0.0, 0.0, 1.0] } else { DOWN };
             let scale = if name == "rect" { [0.3, 0.3, 1.0] } else { [1.0; 3] };
             s.queue_edits(vec![move_light("lamp", trs([0.35, 0.3, -0.2], rotation, scale))]).unwrap();
-            let moved = stats(&s.tick().unwrap());
+            let moved = photon_stats(&s.tick().unwrap());
             eprintln!("{name}: at the move {moved:?}");
             assert!(moved.pruned > 0 && moved.filled > 0, "{name}: the move left the map untouched");
             let dof = moved.distribution_cells as f64 - 1.0;
             let critical = ChiSquared::new(dof).unwrap().inverse_cdf(0.99);
             let mut chi2 = Vec::new();
             for _ in 0..8 {
-                chi2.push(stats(&s.tick().unwrap()).distribution_chi2);
+                chi2.push(photon_stats(&s.tick().unwrap()).distribution_chi2);
             }
             eprintln!("{name}: χ² over 8 ticks {chi2:?} (critical {critical:.0}, dof {dof})");
             assert!(chi2[7] < critical, "{name}: DM_C did not converge: χ² {chi2:?}");
@@ -155,7 +143,7 @@ fn error_mode_never_traces_more_rays_than_naive() {
             (0..8)
                 .map(|i| {
                     s.queue_edits(anim.edits_at(i as f32 / 10.0)).unwrap();
-                    stats(&s.tick().unwrap()).photon_rays()
+                    photon_stats(&s.tick().unwrap()).photon_rays()
                 })
                 .collect::<Vec<u64>>()
         })
@@ -175,7 +163,7 @@ fn error_mode_keeps_the_initial_energies_over_ten_thousand_ticks() {
     // close, so nothing drifts. A floor slides back and forth in its own plane under a spot
     // light for 10,000 ticks: every path ending on it or leaving it is re-verified with rays
     // each tick, none is retraced, and the gathered flux equals the initial one bit for bit.
-    let scene = scene_from(json!({
+    let scene = scene_from_json(json!({
         "camera": {"position": [0, 1, -1], "look_at": [0, 0, 0], "vfov_deg": 60, "resolution": [4, 4]},
         "materials": {"white": {"type": "diffuse", "reflectance": [0.7, 0.7, 0.7]}},
         "objects": [
@@ -192,7 +180,7 @@ fn error_mode_keeps_the_initial_energies_over_ten_thousand_ticks() {
     pool.install(|| {
         let config = PhotonReuseConfig { paths: 300, reuse: ReuseMode::Error, ..PhotonReuseConfig::default() };
         let mut s = session(scene, config, 8, &device);
-        let initial = stats(&s.tick().unwrap());
+        let initial = photon_stats(&s.tick().unwrap());
         assert!(initial.grid_power[1] > 0.0);
         let (mut verify_rays, mut retraced) = (0u64, 0u64);
         let mut last = initial.clone();
@@ -203,7 +191,7 @@ fn error_mode_keeps_the_initial_energies_over_ten_thousand_ticks() {
                 transform: trs([x, 0.0, 0.0], UP, [50.0, 50.0, 1.0]),
             }])
             .unwrap();
-            last = stats(&s.tick().unwrap());
+            last = photon_stats(&s.tick().unwrap());
             verify_rays += last.verify_rays;
             retraced += last.partly_retraced + last.fully_retraced;
         }

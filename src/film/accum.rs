@@ -14,6 +14,7 @@ pub struct PixelAccum {
 }
 
 impl PixelAccum {
+    /// Adds one estimate's value (the count is the caller's: see `count`).
     pub fn add(&mut self, value: Rgb) {
         self.sum[0] += value.r as f64;
         self.sum[1] += value.g as f64;

@@ -123,14 +123,16 @@ fn render_still(args: &RenderArgs) -> Result<()> {
     write_image(&frame.image, &args.out, args.exposure)?;
     let mean = frame.image.mean();
     eprintln!(
-        "wrote {} ({format:?}): {} spp in {secs:.2} s ({:.1} spp/s), {:.1} Mrays/s, mean radiance [{:.4}, {:.4}, {:.4}]",
+        "wrote {} ({format:?}): {} spp in {secs:.2} s ({:.1} spp/s), {:.1} Mrays/s, mean radiance [{:.4}, {:.4}, {:.4}], \
+         resident technique memory {:.1} MiB",
         args.out.display(),
         frame.spp,
         frame.spp as f64 / secs,
         rays as f64 / secs / 1e6,
         mean.r,
         mean.g,
-        mean.b
+        mean.b,
+        frame.stats.detail.memory_bytes() as f64 / 1048576.0
     );
     Ok(())
 }

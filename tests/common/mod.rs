@@ -32,6 +32,20 @@ pub fn render(scene: Scene, config: TechniqueConfig, seed: u64, ticks: u32, thre
     })
 }
 
+/// A scene from inline JSON (mesh paths resolve against the bundled scenes folder).
+pub fn scene_from_json(v: serde_json::Value) -> Scene {
+    let desc: relume::scene::SceneDesc = serde_json::from_value(v).expect("scene JSON");
+    Scene::from_desc(desc, &scenes_dir(), &scenes_dir()).expect("valid scene")
+}
+
+/// The stats of a `photon_reuse` frame.
+pub fn photon_stats(frame: &Frame) -> relume::technique::photon_reuse::PhotonStats {
+    match &frame.stats.detail {
+        relume::technique::TechniqueStats::PhotonReuse(s) => (**s).clone(),
+        other => panic!("photon_reuse stats expected, got {other:?}"),
+    }
+}
+
 pub fn path(spp: u32) -> PathConfig {
     PathConfig { spp, ..PathConfig::default() }
 }

@@ -5,8 +5,8 @@
 //! The density estimate uses photons from the second bounce on (the first hit of a path is
 //! direct light, which NEE already counts; light reaching a diffuse surface through a specular
 //! chain is counted by photons) with a uniform disc kernel of radius r:
-//! L_o(x, ω_o) ≈ Σ_p f_r(ω_o, ω_p) Φ_p / (π r²) over photons within r on the same side of the
-//! surface. The paper splats photons in screen space on a GPU; on the CPU a gather through a
+//! L_o(x, ω_o) ≈ Σ_p f_r(ω_o, ω_p) Φ_p / (π r²) over photons within r whose surface faces the
+//! same way as the query's side (normals within 60°), so thin walls and corners do not leak. The paper splats photons in screen space on a GPU; on the CPU a gather through a
 //! spatial hash grid (cell size 2r, so a query visits at most 8 cells) is the natural
 //! equivalent, and it costs work per pixel rather than per photon.
 use super::store::PathStore;
@@ -18,14 +18,19 @@ use crate::technique::nee::sample_next_event;
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 
+/// Least cosine between a photon's surface normal and the query's for the photon to count.
+const FACING_COSINE: f32 = 0.5;
+
 /// Longest specular chain a camera ray follows before it gives up.
 const MAX_SPECULAR_CHAIN: u32 = 16;
 
 #[derive(Clone, Copy, Debug)]
 struct GridPhoton {
     position: Vec3,
-    /// Direction towards where the photon came from (ω_p).
-    towards_source: Vec3,
+    /// The unit geometric normal of the photon's surface, on the side the photon arrived from.
+    /// Gathering needs only this: the Lambertian BRDF is constant on a side, and a query only
+    /// accepts photons whose surface faces the way its own does (see [`PhotonGrid::radiance`]).
+    facing: Vec3,
     power: Rgb,
 }
 
@@ -65,10 +70,15 @@ impl PhotonGrid {
             let gathered: Vec<GridPhoton> = (0..store.paths)
                 .into_par_iter()
                 .filter(|&path| store.word[path].photons() as usize > row_index && diffuse[row.object[path] as usize])
-                .map(|path| GridPhoton {
-                    position: row.position[path],
-                    towards_source: -row.incoming[path],
-                    power: row.power[path],
+                .map(|path| {
+                    let [a, b, c] = scene.triangle(SurfaceId::Object(row.object[path]), row.prim[path]);
+                    let n = (b - a).cross(c - a).normalize_or_zero();
+                    let incoming = row.incoming[path];
+                    GridPhoton {
+                        position: row.position[path],
+                        facing: if n.dot(incoming) < 0.0 { n } else { -n },
+                        power: row.power[path],
+                    }
                 })
                 .collect();
             photons.extend(gathered);
@@ -87,7 +97,7 @@ impl PhotonGrid {
         }
         let mut fill = starts.clone();
         let mut sorted =
-            vec![GridPhoton { position: Vec3::ZERO, towards_source: Vec3::ZERO, power: Rgb::BLACK }; photons.len()];
+            vec![GridPhoton { position: Vec3::ZERO, facing: Vec3::ZERO, power: Rgb::BLACK }; photons.len()];
         for (p, &k) in photons.iter().zip(&keys) {
             sorted[fill[k] as usize] = *p;
             fill[k] += 1;
@@ -131,12 +141,15 @@ impl PhotonGrid {
                 }
             }
         }
-        let side = n.dot(wo);
+        // Only photons on a surface facing the same way as this side of the query's: not the
+        // other side of a thin wall, nor the inside face of a corner (a box seen from outside
+        // would otherwise glow along its edges with the light inside it).
+        let n_side = if n.dot(wo) >= 0.0 { n } else { -n };
         let mut sum = Rgb::BLACK;
         for &b in &buckets[..count] {
             for ph in &self.photons[self.starts[b] as usize..self.starts[b + 1] as usize] {
-                if (ph.position - p).length_squared() <= r2 && ph.towards_source.dot(n) * side > 0.0 {
-                    sum += material.eval(n, wo, ph.towards_source) * ph.power;
+                if (ph.position - p).length_squared() <= r2 && ph.facing.dot(n_side) > FACING_COSINE {
+                    sum += material.eval(n, wo, ph.facing) * ph.power;
                 }
             }
         }
