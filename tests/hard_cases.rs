@@ -31,22 +31,6 @@ fn render_path(scene: Scene) -> LinearImage {
     render(scene, TechniqueConfig::Path(path(64)), 11, 1, 2).image
 }
 
-fn block_means(img: &LinearImage) -> Vec<f64> {
-    let mut out = Vec::new();
-    for by in 0..4 {
-        for bx in 0..4 {
-            let mut s = 0.0f64;
-            for y in by * 8..(by + 1) * 8 {
-                for x in bx * 8..(bx + 1) * 8 {
-                    s += img.get(x, y).luminance() as f64;
-                }
-            }
-            out.push(s / 64.0);
-        }
-    }
-    out
-}
-
 #[test]
 fn far_from_the_origin_and_at_any_scale_the_cornell_box_renders_the_same() {
     // Property: ray origins are offset by the hit point's floating-point error bound

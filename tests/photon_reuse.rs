@@ -49,27 +49,7 @@ fn cornell_box_matches_the_path_reference() {
     )
     .image;
     let photons = render(scene, TechniqueConfig::PhotonReuse(config(300_000, ReuseMode::Naive)), 3, 24, 2).image;
-    assert_finite_non_negative(&photons);
-    let (a, b) = (photons.mean(), reference.mean());
-    eprintln!("cornell: photon_reuse {a:?} path {b:?}");
-    for (x, y) in a.to_array().iter().zip(b.to_array()) {
-        assert!((x - y).abs() < 0.03 * y, "channel {x} vs {y}");
-    }
-    let block = |img: &relume::film::LinearImage, bx: u32, by: u32| {
-        let mut s = 0.0f64;
-        for y in by * 12..(by + 1) * 12 {
-            for x in bx * 12..(bx + 1) * 12 {
-                s += img.get(x, y).luminance() as f64;
-            }
-        }
-        s / 144.0
-    };
-    for by in 0..4 {
-        for bx in 0..4 {
-            let (p, r) = (block(&photons, bx, by), block(&reference, bx, by));
-            assert!((p - r).abs() < 0.10 * r + 0.002, "block ({bx},{by}): {p} vs {r}");
-        }
-    }
+    assert_matches_reference("cornell", &photons, &reference, 0.03, 0.10, 0.002);
 }
 
 #[test]

@@ -234,26 +234,6 @@ fn every_mode_matches_the_path_reference_after_a_block_moves() {
             }
             last.image
         });
-        assert_finite_non_negative(&image);
-        let (a, b) = (image.mean(), reference.mean());
-        eprintln!("{reuse:?}: photon_reuse {a:?} path {b:?}");
-        for (x, y) in a.to_array().iter().zip(b.to_array()) {
-            assert!((x - y).abs() < 0.035 * y, "{reuse:?}: channel {x} vs {y}");
-        }
-        let block = |img: &relume::film::LinearImage, bx: u32, by: u32| {
-            let mut s = 0.0f64;
-            for y in by * 8..(by + 1) * 8 {
-                for x in bx * 8..(bx + 1) * 8 {
-                    s += img.get(x, y).luminance() as f64;
-                }
-            }
-            s / 64.0
-        };
-        for by in 0..4 {
-            for bx in 0..4 {
-                let (p, r) = (block(&image, bx, by), block(&reference, bx, by));
-                assert!((p - r).abs() < 0.12 * r + 0.003, "{reuse:?} block ({bx},{by}): {p} vs {r}");
-            }
-        }
+        assert_matches_reference(&format!("{reuse:?}"), &image, &reference, 0.035, 0.12, 0.003);
     }
 }

@@ -73,3 +73,43 @@ pub fn assert_finite_non_negative(img: &LinearImage) {
         assert!(p.is_finite() && p.min_component() >= 0.0, "pixel {i} = {p:?}");
     }
 }
+
+/// Mean luminance of each of 4×4 blocks, row by row (the image's sides must divide by 4).
+pub fn block_means(img: &LinearImage) -> Vec<f64> {
+    let (bw, bh) = (img.width / 4, img.height / 4);
+    let mut out = Vec::with_capacity(16);
+    for by in 0..4 {
+        for bx in 0..4 {
+            let mut s = 0.0f64;
+            for y in by * bh..(by + 1) * bh {
+                for x in bx * bw..(bx + 1) * bw {
+                    s += img.get(x, y).luminance() as f64;
+                }
+            }
+            out.push(s / (bw * bh) as f64);
+        }
+    }
+    out
+}
+
+/// Asserts `image` matches `reference`: every channel mean within `channel_tolerance`
+/// (relative), and every 4×4 block's mean luminance within `block_tolerance` (relative) plus
+/// `block_floor` (absolute, for dark blocks).
+pub fn assert_matches_reference(
+    label: &str,
+    image: &LinearImage,
+    reference: &LinearImage,
+    channel_tolerance: f32,
+    block_tolerance: f64,
+    block_floor: f64,
+) {
+    assert_finite_non_negative(image);
+    let (a, b) = (image.mean(), reference.mean());
+    eprintln!("{label}: {a:?} against the reference {b:?}");
+    for (x, y) in a.to_array().iter().zip(b.to_array()) {
+        assert!((x - y).abs() < channel_tolerance * y, "{label}: channel {x} vs {y}");
+    }
+    for (i, (p, r)) in block_means(image).iter().zip(block_means(reference)).enumerate() {
+        assert!((p - r).abs() < block_tolerance * r + block_floor, "{label}: block {i}: {p} vs {r}");
+    }
+}

@@ -56,6 +56,17 @@ pub fn write_all(dir: &Path, r: &ErrorReport) -> Result<()> {
     Ok(())
 }
 
+/// The legend every plot draws, top right.
+fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(chart: &mut ChartContext<'a, DB, CT>) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(err)
+}
+
 struct TimeVsError<'a>(&'a ErrorReport);
 struct RaysPerFrame<'a>(&'a ErrorReport);
 struct StageTimes<'a>(&'a ErrorReport);
@@ -90,13 +101,7 @@ impl Plot for TimeVsError<'_> {
                 .label(format!("{}{}", if x.pareto { "★ " } else { "" }, x.config))
                 .legend(move |(px, py)| Circle::new((px + 9, py), 6, c.filled()));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(err)
+        legend(&mut chart)
     }
 }
 
@@ -130,13 +135,7 @@ impl Plot for RaysPerFrame<'_> {
                 .label(s.config.clone())
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(err)
+        legend(&mut chart)
     }
 }
 
@@ -186,12 +185,6 @@ impl Plot for StageTimes<'_> {
                 .label(*stage)
                 .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], c.filled()));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(err)
+        legend(&mut chart)
     }
 }
