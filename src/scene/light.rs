@@ -32,6 +32,8 @@ pub struct IncidentSample {
     /// Solid-angle density; 1 for delta lights.
     pub pdf: f32,
     pub delta: bool,
+    /// Unit normal at the sampled light point (zero for point and spot lights).
+    pub normal: Vec3,
 }
 
 /// The object-space mesh of a light with a shape (`None` for point and spot lights).
@@ -116,7 +118,14 @@ impl LightGeometry {
                 let dist2 = d.length_squared();
                 (dist2 > 0.0).then(|| {
                     let dist = dist2.sqrt();
-                    IncidentSample { wi: d / dist, dist, li: *intensity / dist2, pdf: 1.0, delta: true }
+                    IncidentSample {
+                        wi: d / dist,
+                        dist,
+                        li: *intensity / dist2,
+                        pdf: 1.0,
+                        delta: true,
+                        normal: Vec3::ZERO,
+                    }
                 })
             }
             LightGeometry::Spot { position, axis, intensity, cos_falloff_start, cos_falloff_end } => {
@@ -134,6 +143,7 @@ impl LightGeometry {
                     li: *intensity * (falloff / dist2),
                     pdf: 1.0,
                     delta: true,
+                    normal: Vec3::ZERO,
                 })
             }
             LightGeometry::Area { radiance, triangles, area, by_area } => {
@@ -152,6 +162,7 @@ impl LightGeometry {
                     li: *radiance,
                     pdf: dist2 / (cos_l * area),
                     delta: false,
+                    normal: n,
                 })
             }
         }
@@ -212,6 +223,33 @@ impl LightGeometry {
                 *intensity * (falloff / sampling::uniform_cone_pdf(*cos_falloff_end))
             }
             LightGeometry::Area { radiance, area, .. } => *radiance * (PI * area),
+        }
+    }
+
+    /// Density over area with which [`LightGeometry::sample_emission`] and
+    /// [`LightGeometry::sample_incident`] pick an emission point: 1/A for area lights, 1 for
+    /// point and spot lights (a delta in position).
+    pub fn pdf_position(&self) -> f32 {
+        match self {
+            LightGeometry::Area { area, .. } if *area > 0.0 => 1.0 / area,
+            LightGeometry::Area { .. } => 0.0,
+            _ => 1.0,
+        }
+    }
+
+    /// Solid-angle density with which [`LightGeometry::sample_emission`] picks `dir` leaving a
+    /// point with unit normal `n` (ignored for point and spot lights).
+    pub fn pdf_emission_direction(&self, n: Vec3, dir: Vec3) -> f32 {
+        match self {
+            LightGeometry::Point { .. } => sampling::UNIFORM_SPHERE_PDF,
+            LightGeometry::Spot { axis, cos_falloff_end, .. } => {
+                if axis.dot(dir) >= *cos_falloff_end {
+                    sampling::uniform_cone_pdf(*cos_falloff_end)
+                } else {
+                    0.0
+                }
+            }
+            LightGeometry::Area { .. } => sampling::cosine_hemisphere_pdf(n.dot(dir)),
         }
     }
 

@@ -50,6 +50,7 @@
 //! openings are noisy.
 mod lanes;
 mod length;
+mod packets;
 
 pub use length::{max_path_length, MAX_PATH_LENGTH, MIN_PATH_LENGTH};
 
@@ -57,7 +58,8 @@ use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStat
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
 use crate::scene::Scene;
-use lanes::LaneSettings;
+use lanes::{PathContext, PathLane};
+use packets::LaneSettings;
 use serde::{Deserialize, Serialize};
 
 /// Configuration of the `path` technique. Unknown fields are rejected.
@@ -222,19 +224,25 @@ impl Technique for PathTracer {
 
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
         let (l_m, rho) = self.path_length_for(ctx.scene);
-        let settings = LaneSettings {
-            lanes: self.config.packet_width as usize,
-            regeneration: self.config.regeneration,
-            max_path_length: l_m,
-        };
+        let settings =
+            LaneSettings { lanes: self.config.packet_width as usize, regeneration: self.config.regeneration };
         let queue = queue_pixels(self.config.packet_width, self.config.regeneration_steps, rho);
+        let lane_context = PathContext { scene: ctx.scene, accel: ctx.accel, max_path_length: l_m };
         let mut total = PathStats::default();
         for _ in 0..self.config.spp {
             let sample = self.passes;
             let stats = film.accumulate_chunks(
                 queue as usize,
                 |first, chunk| {
-                    lanes::trace_chunk(ctx.scene, ctx.accel, &settings, (ctx.seed, ctx.tick, sample), first, chunk)
+                    packets::trace_chunk::<PathLane>(
+                        ctx.scene,
+                        ctx.accel.scene(),
+                        &lane_context,
+                        &settings,
+                        (ctx.seed, ctx.tick, sample),
+                        first,
+                        chunk,
+                    )
                 },
                 PathStats::merge,
             );
