@@ -148,7 +148,10 @@ fn bench_rays_reports_rates_and_regeneration_rows() {
     assert!(v["raw"]["incoherent_closest_mrays"].as_f64().unwrap() > 0.0);
     assert!(v["path_to_raw_ratio"].as_f64().unwrap() > 0.0);
     let rows = v["regeneration"].as_array().unwrap();
-    assert_eq!(rows.len(), 9, "3 variants × 3 widths");
+    assert_eq!(rows.len(), 18, "path and bdpt × 3 variants × 3 widths");
+    for technique in ["path", "bdpt"] {
+        assert_eq!(rows.iter().filter(|r| r["technique"] == technique).count(), 9, "{technique}");
+    }
     // Utilisation is a ratio of lane counts, not a time: regeneration must raise it at 16 lanes.
     for row in rows.iter().filter(|r| r["packet_width"] == 16) {
         assert!(row["regeneration_utilisation"].as_f64() > row["no_regeneration_utilisation"].as_f64(), "{row}");

@@ -55,15 +55,14 @@ fn far_from_the_origin_and_at_any_scale_the_cornell_box_renders_the_same() {
     }
 }
 
-/// Both techniques, small enough for many hard cases.
-fn techniques() -> [TechniqueConfig; 2] {
+/// Every technique, small enough for many hard cases.
+fn techniques() -> [TechniqueConfig; 3] {
     [
         TechniqueConfig::Path(path(4)),
         TechniqueConfig::PhotonReuse(PhotonReuseConfig { paths: 20_000, ..PhotonReuseConfig::default() }),
+        TechniqueConfig::Bdpt(relume::technique::bdpt::BdptConfig { spp: 2, ..Default::default() }),
     ]
 }
-
-const UP: [f32; 4] = [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2];
 
 /// A 4 m diffuse floor, a camera and a point light of `intensity` placed by the caller.
 fn floor_scene(camera: [f32; 3], light: [f32; 3], intensity: f32) -> Scene {
@@ -71,7 +70,7 @@ fn floor_scene(camera: [f32; 3], light: [f32; 3], intensity: f32) -> Scene {
         "camera": {"position": camera, "look_at": [0, 0, 0], "vfov_deg": 40, "resolution": [16, 16]},
         "materials": {"white": {"type": "diffuse", "reflectance": [0.8, 0.8, 0.8]}},
         "objects": [{"name": "floor", "shape": {"type": "quad"}, "material": "white",
-                     "transform": {"rotation": UP, "scale": [2, 2, 1]}}],
+                     "transform": {"rotation": FACE_UP, "scale": [2, 2, 1]}}],
         "lights": [{"name": "bulb", "emitter": {"type": "point", "intensity": [intensity, intensity, intensity]},
                     "transform": {"translation": light}}]
     }))
@@ -146,8 +145,8 @@ fn coincident_surfaces_render_deterministically_and_finite() {
         "materials": {"red": {"type": "diffuse", "reflectance": [0.8, 0.1, 0.1]},
                       "green": {"type": "diffuse", "reflectance": [0.1, 0.8, 0.1]}},
         "objects": [
-            {"name": "a", "shape": {"type": "quad"}, "material": "red", "transform": {"rotation": UP}},
-            {"name": "b", "shape": {"type": "quad"}, "material": "green", "transform": {"rotation": UP}}
+            {"name": "a", "shape": {"type": "quad"}, "material": "red", "transform": {"rotation": FACE_UP}},
+            {"name": "b", "shape": {"type": "quad"}, "material": "green", "transform": {"rotation": FACE_UP}}
         ],
         "lights": [{"name": "bulb", "emitter": {"type": "point", "intensity": [5, 5, 5]},
                     "transform": {"translation": [0, 2, 0]}}]

@@ -3,17 +3,6 @@ mod common;
 use common::*;
 use relume::technique::TechniqueConfig;
 
-/// Furnace (scenes/README.md): L = ρ I / (π R² (1 − ρ)) = 1/π inside the sphere. With paths cut
-/// after k scattering vertices the sum stops at ρ^k: L_k = (I/πR²) Σ_{j=1..k} ρ^j.
-fn furnace_radiance(max_vertices: Option<u32>) -> f64 {
-    let rho = 0.5f64;
-    let scale = 1.0 / std::f64::consts::PI;
-    match max_vertices {
-        None => scale * rho / (1.0 - rho),
-        Some(k) => scale * (1..=k).map(|j| rho.powi(j as i32)).sum::<f64>(),
-    }
-}
-
 /// Independent batch estimates of the furnace's mean radiance (green channel; all are equal).
 fn furnace_batches(config: relume::technique::path::PathConfig, batches: u64, ticks: u32) -> Vec<f64> {
     (0..batches)

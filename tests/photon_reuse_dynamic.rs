@@ -16,9 +16,6 @@ fn session(scene: Scene, config: PhotonReuseConfig, seed: u64, device: &Device) 
     Session::new(scene, &TechniqueConfig::PhotonReuse(config), seed, device).expect("session")
 }
 
-const UP: [f32; 4] = [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2];
-const DOWN: [f32; 4] = [std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2];
-
 fn trs(translation: [f32; 3], rotation: [f32; 4], scale: [f32; 3]) -> Trs {
     Trs { translation, rotation, scale }
 }
@@ -34,13 +31,13 @@ fn slab_room() -> Scene {
         "materials": {"white": {"type": "diffuse", "reflectance": [0.8, 0.8, 0.8]}},
         "objects": [
             {"name": "floor", "shape": {"type": "quad"}, "material": "white",
-             "transform": {"rotation": UP, "scale": [3, 3, 1]}},
+             "transform": {"rotation": FACE_UP, "scale": [3, 3, 1]}},
             {"name": "slab", "shape": {"type": "box"}, "material": "white",
              "transform": {"translation": [0, 2.05, 0], "scale": [4, 0.05, 4]}}
         ],
         "lights": [{"name": "panel", "dynamic": true,
                     "emitter": {"type": "rect", "radiance": [10, 10, 10]},
-                    "transform": {"translation": [0, 1.5, 0], "rotation": DOWN, "scale": [0.25, 0.25, 1]}}]
+                    "transform": {"translation": [0, 1.5, 0], "rotation": FACE_DOWN, "scale": [0.25, 0.25, 1]}}]
     }))
 }
 
@@ -57,7 +54,7 @@ fn a_light_moved_above_a_slab_leaks_no_light_below_it() {
             let mut s = session(slab_room(), config, 4, &device);
             let lit = s.tick().unwrap().image.mean();
             assert!(lit.g > 0.01, "{reuse:?}: the floor should be lit first: {lit:?}");
-            s.queue_edits(vec![move_light("panel", trs([0.0, 2.6, 0.0], DOWN, [0.25, 0.25, 1.0]))]).unwrap();
+            s.queue_edits(vec![move_light("panel", trs([0.0, 2.6, 0.0], FACE_DOWN, [0.25, 0.25, 1.0]))]).unwrap();
             let moved = s.tick().unwrap();
             let st = photon_stats(&moved);
             assert!(st.origin_rays > 0, "{reuse:?}: no primary segment was verified: {st:?}");
@@ -92,8 +89,8 @@ fn distribution_maps_converge_to_their_targets_after_a_light_stops() {
     let pool = thread_pool(2).unwrap();
     let cases = [
         ("point", sphere_with(json!({"type": "point", "intensity": [1, 1, 1]}), [0.0, 0.0, 0.0, 1.0], [1.0; 3])),
-        ("spot", sphere_with(json!({"type": "spot", "intensity": [1, 1, 1], "cone_deg": 50}), DOWN, [1.0; 3])),
-        ("rect", sphere_with(json!({"type": "rect", "radiance": [1, 1, 1]}), DOWN, [0.3, 0.3, 1.0])),
+        ("spot", sphere_with(json!({"type": "spot", "intensity": [1, 1, 1], "cone_deg": 50}), FACE_DOWN, [1.0; 3])),
+        ("rect", sphere_with(json!({"type": "rect", "radiance": [1, 1, 1]}), FACE_DOWN, [0.3, 0.3, 1.0])),
     ];
     for (name, scene) in cases {
         pool.install(|| {
@@ -109,7 +106,7 @@ fn distribution_maps_converge_to_their_targets_after_a_light_stops() {
             let mut s = session(scene, config, 11, &device);
             let first = photon_stats(&s.tick().unwrap());
             assert_eq!((first.distribution_cells, first.memory.distribution_maps), (0, 0), "{name}");
-            let rotation = if name == "point" { [0.0, 0.0, 0.0, 1.0] } else { DOWN };
+            let rotation = if name == "point" { [0.0, 0.0, 0.0, 1.0] } else { FACE_DOWN };
             let scale = if name == "rect" { [0.3, 0.3, 1.0] } else { [1.0; 3] };
             s.queue_edits(vec![move_light("lamp", trs([0.35, 0.3, -0.2], rotation, scale))]).unwrap();
             let moved = photon_stats(&s.tick().unwrap());
@@ -168,12 +165,12 @@ fn error_mode_keeps_the_initial_energies_over_ten_thousand_ticks() {
         "materials": {"white": {"type": "diffuse", "reflectance": [0.7, 0.7, 0.7]}},
         "objects": [
             {"name": "floor", "shape": {"type": "quad"}, "material": "white", "dynamic": true,
-             "transform": {"rotation": UP, "scale": [50, 50, 1]}},
+             "transform": {"rotation": FACE_UP, "scale": [50, 50, 1]}},
             {"name": "ceiling", "shape": {"type": "quad"}, "material": "white",
-             "transform": {"translation": [0, 2, 0], "rotation": DOWN, "scale": [50, 50, 1]}}
+             "transform": {"translation": [0, 2, 0], "rotation": FACE_DOWN, "scale": [50, 50, 1]}}
         ],
         "lights": [{"name": "spot", "emitter": {"type": "spot", "intensity": [5, 5, 5], "cone_deg": 25},
-                    "transform": {"translation": [0, 1, 0], "rotation": DOWN}}]
+                    "transform": {"translation": [0, 1, 0], "rotation": FACE_DOWN}}]
     }));
     let device = Device::new(2).unwrap();
     let pool = thread_pool(2).unwrap();
@@ -188,7 +185,7 @@ fn error_mode_keeps_the_initial_energies_over_ten_thousand_ticks() {
             let x = if tick % 2 == 1 { 0.01 } else { 0.0 };
             s.queue_edits(vec![Edit::Object {
                 name: "floor".into(),
-                transform: trs([x, 0.0, 0.0], UP, [50.0, 50.0, 1.0]),
+                transform: trs([x, 0.0, 0.0], FACE_UP, [50.0, 50.0, 1.0]),
             }])
             .unwrap();
             last = photon_stats(&s.tick().unwrap());

@@ -106,6 +106,16 @@ impl LightGeometry {
         }
     }
 
+    /// The emitting side's unit normal of a (planar) area light; zero for point and spot lights.
+    pub fn surface_normal(&self) -> Vec3 {
+        match self {
+            LightGeometry::Area { triangles, .. } => {
+                triangles.first().map_or(Vec3::ZERO, |[a, b, c]| (*b - *a).cross(*c - *a).normalize_or_zero())
+            }
+            _ => Vec3::ZERO,
+        }
+    }
+
     pub fn is_delta(&self) -> bool {
         !matches!(self, LightGeometry::Area { .. })
     }

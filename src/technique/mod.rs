@@ -5,6 +5,7 @@
 //! A technique is driven by the engine once per tick: `update` sees what the edits changed
 //! (verify, invalidate, retrace), then `render` adds samples to the film. Per-tick calls go
 //! through `Box<dyn Technique>`; per-ray variety inside a technique is a closed `enum`.
+pub mod bdpt;
 pub mod nee;
 pub mod path;
 pub mod photon_reuse;
@@ -70,10 +71,11 @@ pub struct RenderStats {
 pub enum TechniqueStats {
     Path(path::PathStats),
     PhotonReuse(Box<photon_reuse::PhotonStats>),
+    Bdpt(Box<bdpt::BdptStats>),
 }
 
 /// The ids [`TechniqueConfig`] accepts.
-pub const TECHNIQUE_IDS: &[&str] = &["path", "photon_reuse"];
+pub const TECHNIQUE_IDS: &[&str] = &["path", "photon_reuse", "bdpt"];
 
 impl TechniqueStats {
     /// Bytes the technique keeps resident between ticks (its light-transport state; the film
@@ -82,6 +84,7 @@ impl TechniqueStats {
         match self {
             TechniqueStats::Path(_) => 0,
             TechniqueStats::PhotonReuse(s) => s.memory.total() + s.grid_bytes,
+            TechniqueStats::Bdpt(_) => 0,
         }
     }
 }
@@ -92,6 +95,7 @@ impl TechniqueStats {
 pub enum TechniqueConfig {
     Path(path::PathConfig),
     PhotonReuse(photon_reuse::PhotonReuseConfig),
+    Bdpt(bdpt::BdptConfig),
 }
 
 impl TechniqueConfig {
@@ -99,6 +103,7 @@ impl TechniqueConfig {
         match self {
             TechniqueConfig::Path(_) => "path",
             TechniqueConfig::PhotonReuse(_) => "photon_reuse",
+            TechniqueConfig::Bdpt(_) => "bdpt",
         }
     }
 
@@ -107,6 +112,16 @@ impl TechniqueConfig {
         match self {
             TechniqueConfig::Path(c) => c.spp,
             TechniqueConfig::PhotonReuse(c) => c.spp,
+            TechniqueConfig::Bdpt(c) => c.spp,
+        }
+    }
+
+    /// Sets the camera samples per pixel each tick renders.
+    pub fn set_spp_per_tick(&mut self, spp: u32) {
+        match self {
+            TechniqueConfig::Path(c) => c.spp = spp,
+            TechniqueConfig::PhotonReuse(c) => c.spp = spp,
+            TechniqueConfig::Bdpt(c) => c.spp = spp,
         }
     }
 
@@ -115,13 +130,14 @@ impl TechniqueConfig {
         match self {
             TechniqueConfig::Path(c) => c.validate(),
             TechniqueConfig::PhotonReuse(c) => c.validate(),
+            TechniqueConfig::Bdpt(c) => c.validate(),
         }
     }
 
     /// Resident photon paths the technique keeps (0 for techniques without any).
     pub fn photon_paths(&self) -> u32 {
         match self {
-            TechniqueConfig::Path(_) => 0,
+            TechniqueConfig::Path(_) | TechniqueConfig::Bdpt(_) => 0,
             TechniqueConfig::PhotonReuse(c) => c.paths,
         }
     }
@@ -149,5 +165,6 @@ pub fn build(config: &TechniqueConfig, scene: &Scene) -> Result<Box<dyn Techniqu
     match config {
         TechniqueConfig::Path(c) => Ok(Box::new(path::PathTracer::new(c.clone(), scene)?)),
         TechniqueConfig::PhotonReuse(c) => Ok(Box::new(photon_reuse::PhotonReuse::new(c.clone(), scene)?)),
+        TechniqueConfig::Bdpt(c) => Ok(Box::new(bdpt::Bdpt::new(c.clone(), scene)?)),
     }
 }

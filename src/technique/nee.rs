@@ -15,6 +15,12 @@ pub struct NextEvent {
     pub shadow: Ray,
     /// `f · L_i · |cos θ_i| / pdf`, times the MIS weight; per unit path throughput.
     pub contribution: Rgb,
+    /// The light chosen, its selection probability, and the sampled point and its normal (zero
+    /// for point and spot lights), for callers that weigh strategies themselves (`bdpt`).
+    pub light: usize,
+    pub light_pmf: f32,
+    pub light_point: Vec3,
+    pub light_normal: Vec3,
 }
 
 /// Samples direct light at `p` (unit geometric normal `n`, outgoing `wo`) on a non-specular
@@ -45,5 +51,9 @@ pub fn sample_next_event(
     Some(NextEvent {
         shadow: Ray { origin, dir: s.wi, tnear: 0.0, tfar: s.dist * (1.0 - SHADOW_EPSILON) },
         contribution: f * s.li * (s.wi.dot(n).abs() * weight / light_pdf),
+        light: li,
+        light_pmf: pmf,
+        light_point: origin + s.wi * s.dist,
+        light_normal: s.normal,
     })
 }

@@ -65,6 +65,9 @@ impl TechniqueConfig {
     pub fn label(&self) -> String {
         match self {
             TechniqueConfig::Path(c) => format!("path:spp={}", c.spp),
+            TechniqueConfig::Bdpt(c) => {
+                format!("bdpt:spp={}{}", c.spp, if c.permute { "" } else { ":permute=false" })
+            }
             TechniqueConfig::PhotonReuse(c) => {
                 let mode = serde_json::to_value(c.reuse).ok().and_then(|v| v.as_str().map(str::to_string));
                 let mode = mode.unwrap_or_default();

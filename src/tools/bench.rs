@@ -5,7 +5,8 @@
 //!    first hits to light samples), single rays on every worker.
 //! 2. The `path` technique's achieved ray rate, as a fraction of the raw incoherent rate.
 //! 3. Path regeneration against none at packet widths 1, 8 and 16 on dark (ρ × 0.5), normal and
-//!    bright (ρ_S ≈ 0.8) variants of the scene, as in Novák et al. (2010), Table 1.
+//!    bright (ρ_S ≈ 0.8) variants of the scene, as in Novák et al. (2010), Table 1, for `path`
+//!    and for `bdpt`'s eye paths.
 //!
 //! Each measurement repeats until `--seconds` have passed; only rates in one run are compared.
 use super::render::load_scene;
@@ -14,6 +15,7 @@ use crate::core::{offset_ray_origin, sampling, Rng, ShadingFrame};
 use crate::embree::{Device, Ray};
 use crate::engine::{thread_pool, Session};
 use crate::scene::{Scene, SceneAccel};
+use crate::technique::bdpt::BdptConfig;
 use crate::technique::path::{max_path_length, PathConfig};
 use crate::technique::{TechniqueConfig, TechniqueStats};
 use anyhow::{Context, Result};
@@ -44,6 +46,8 @@ pub struct RawThroughput {
 
 #[derive(Debug, Serialize)]
 pub struct RegenerationRow {
+    /// `path` or `bdpt` (eye paths; bdpt's light subpaths are traced per packet, outside lanes).
+    pub technique: String,
     pub variant: String,
     pub mean_reflectance: f32,
     pub max_path_length: u32,
@@ -151,16 +155,19 @@ fn raw_throughput(scene: &Scene, accel: &SceneAccel, seconds: f64) -> RawThrough
     }
 }
 
-/// Runs `path` with `config` for `seconds`; returns (Mrays/s, paths/s, utilisation, segments per path).
-fn path_rate(scene: &Scene, config: PathConfig, device: &Device, seconds: f64) -> Result<(f64, f64, f64, f64)> {
-    let mut session = Session::new(scene.clone(), &TechniqueConfig::Path(config), 1, device)?;
+/// Runs a lane technique (`path` or `bdpt`) with `config` for `seconds`; returns (Mrays/s,
+/// paths/s, lane utilisation, eye segments per path).
+fn lane_rate(scene: &Scene, config: TechniqueConfig, device: &Device, seconds: f64) -> Result<(f64, f64, f64, f64)> {
+    let mut session = Session::new(scene.clone(), &config, 1, device)?;
     let start = Instant::now();
     let (mut rays, mut paths, mut lanes, mut active, mut segments) = (0u64, 0u64, 0u64, 0u64, 0u64);
     while paths == 0 || start.elapsed().as_secs_f64() < seconds {
         let frame = session.tick()?;
         rays += frame.stats.rays.total();
-        let TechniqueStats::Path(p) = frame.stats.detail else {
-            anyhow::bail!("bench rays measures the path technique only");
+        let p = match &frame.stats.detail {
+            TechniqueStats::Path(p) => p.clone(),
+            TechniqueStats::Bdpt(b) => b.lanes.clone(),
+            _ => anyhow::bail!("bench rays measures the lane techniques (path, bdpt) only"),
         };
         paths += p.paths;
         lanes += p.lane_steps;
@@ -176,6 +183,14 @@ fn path_rate(scene: &Scene, config: PathConfig, device: &Device, seconds: f64) -
     ))
 }
 
+/// `technique` with `width` lanes and regeneration on or off, other parameters at defaults.
+fn lane_config(technique: &str, width: u32, regeneration: bool) -> TechniqueConfig {
+    match technique {
+        "bdpt" => TechniqueConfig::Bdpt(BdptConfig { packet_width: width, regeneration, ..BdptConfig::default() }),
+        _ => TechniqueConfig::Path(PathConfig { packet_width: width, regeneration, ..PathConfig::default() }),
+    }
+}
+
 pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
     let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
     let threads = args.target.threads();
@@ -184,40 +199,44 @@ pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
     let accel = SceneAccel::build(&device, &scene)?;
     let variants = [("dark", 0.5f32), ("normal", 1.0), ("bright", 0.8 / scene.mean_reflectance().max(1e-3))];
     let widths = [1u32, 8, 16];
-    let bar = ProgressBar::new((3 + 1 + variants.len() * widths.len() * 2) as u64);
+    let techniques = ["path", "bdpt"];
+    let bar = ProgressBar::new((3 + 1 + techniques.len() * variants.len() * widths.len() * 2) as u64);
     bar.set_style(indicatif::ProgressStyle::with_template("{msg:32} [{bar:30}] {pos}/{len}")?.progress_chars("=> "));
     pool.install(|| -> Result<RaysReport> {
         bar.set_message("raw Embree throughput");
         let raw = raw_throughput(&scene, &accel, args.seconds);
         bar.inc(3);
         bar.set_message("path, default configuration");
-        let (path_mrays, path_sps, _, _) = path_rate(&scene, PathConfig::default(), &device, args.seconds)?;
+        let (path_mrays, path_sps, _, _) =
+            lane_rate(&scene, TechniqueConfig::Path(PathConfig::default()), &device, args.seconds)?;
         bar.inc(1);
         let mut rows = Vec::new();
-        for (name, factor) in variants {
-            let variant = scene.with_reflectance_scaled(factor);
-            let rho = variant.mean_reflectance();
-            for width in widths {
-                bar.set_message(format!("{name}, {width} lanes"));
-                let base = PathConfig { packet_width: width, ..PathConfig::default() };
-                let (no_rate, _, no_util, seg) =
-                    path_rate(&variant, PathConfig { regeneration: false, ..base.clone() }, &device, args.seconds)?;
-                bar.inc(1);
-                let (pr_rate, _, pr_util, _) =
-                    path_rate(&variant, PathConfig { regeneration: true, ..base }, &device, args.seconds)?;
-                bar.inc(1);
-                rows.push(RegenerationRow {
-                    variant: name.to_string(),
-                    mean_reflectance: rho,
-                    max_path_length: max_path_length(rho, PathConfig::default().admitted_truncation),
-                    mean_path_length: seg,
-                    packet_width: width,
-                    no_regeneration_utilisation: no_util,
-                    no_regeneration_mrays: no_rate,
-                    regeneration_utilisation: pr_util,
-                    regeneration_mrays: pr_rate,
-                    speedup: pr_rate / no_rate,
-                });
+        for technique in techniques {
+            for (name, factor) in variants {
+                let variant = scene.with_reflectance_scaled(factor);
+                let rho = variant.mean_reflectance();
+                for width in widths {
+                    bar.set_message(format!("{technique}, {name}, {width} lanes"));
+                    let (no_rate, _, no_util, seg) =
+                        lane_rate(&variant, lane_config(technique, width, false), &device, args.seconds)?;
+                    bar.inc(1);
+                    let (pr_rate, _, pr_util, _) =
+                        lane_rate(&variant, lane_config(technique, width, true), &device, args.seconds)?;
+                    bar.inc(1);
+                    rows.push(RegenerationRow {
+                        technique: technique.to_string(),
+                        variant: name.to_string(),
+                        mean_reflectance: rho,
+                        max_path_length: max_path_length(rho, PathConfig::default().admitted_truncation),
+                        mean_path_length: seg,
+                        packet_width: width,
+                        no_regeneration_utilisation: no_util,
+                        no_regeneration_mrays: no_rate,
+                        regeneration_utilisation: pr_util,
+                        regeneration_mrays: pr_rate,
+                        speedup: pr_rate / no_rate,
+                    });
+                }
             }
         }
         bar.finish_and_clear();
@@ -250,10 +269,11 @@ pub fn print_table(r: &RaysReport) {
     println!("  achieved / raw incoherent           {:>8.2}", r.path_to_raw_ratio);
     println!();
     println!("regeneration (PR) vs none (NO)");
-    println!("  variant  rho_S  l_m  l_a   lanes  NO util  NO Mrays/s  PR util  PR Mrays/s  speedup");
+    println!("  technique variant  rho_S  l_m  l_a   lanes  NO util  NO Mrays/s  PR util  PR Mrays/s  speedup");
     for row in &r.regeneration {
         println!(
-            "  {:<7} {:>5.2} {:>4} {:>4.1} {:>6} {:>8.2} {:>11.2} {:>8.2} {:>11.2} {:>8.2}",
+            "  {:<9} {:<7} {:>5.2} {:>4} {:>4.1} {:>6} {:>8.2} {:>11.2} {:>8.2} {:>11.2} {:>8.2}",
+            row.technique,
             row.variant,
             row.mean_reflectance,
             row.max_path_length,

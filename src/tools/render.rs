@@ -44,10 +44,7 @@ pub struct RenderArgs {
 /// parsed like the service's JSON), with `spp` paths per pixel per tick.
 pub fn technique_config(spec: &str, spp: u32) -> Result<TechniqueConfig> {
     let mut config = TechniqueConfig::from_spec(spec).map_err(|e| UsageError(format!("--technique: {e}")))?;
-    match &mut config {
-        TechniqueConfig::Path(c) => c.spp = spp,
-        TechniqueConfig::PhotonReuse(c) => c.spp = spp,
-    }
+    config.set_spp_per_tick(spp);
     config.validate().map_err(|e| UsageError(format!("--technique: {e}")))?;
     Ok(config)
 }

@@ -32,6 +32,11 @@ pub fn render(scene: Scene, config: TechniqueConfig, seed: u64, ticks: u32, thre
     })
 }
 
+/// Rotation (quaternion [x, y, z, w]) turning a quad's or rect light's +Z normal to +Y.
+pub const FACE_UP: [f32; 4] = [-std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2];
+/// Rotation turning +Z to −Y.
+pub const FACE_DOWN: [f32; 4] = [std::f32::consts::FRAC_1_SQRT_2, 0.0, 0.0, std::f32::consts::FRAC_1_SQRT_2];
+
 /// A scene from inline JSON (mesh paths resolve against the bundled scenes folder).
 pub fn scene_from_json(v: serde_json::Value) -> Scene {
     let desc: relume::scene::SceneDesc = serde_json::from_value(v).expect("scene JSON");
@@ -43,6 +48,17 @@ pub fn photon_stats(frame: &Frame) -> relume::technique::photon_reuse::PhotonSta
     match &frame.stats.detail {
         relume::technique::TechniqueStats::PhotonReuse(s) => (**s).clone(),
         other => panic!("photon_reuse stats expected, got {other:?}"),
+    }
+}
+
+/// Furnace (scenes/README.md): L = ρ I / (π R² (1 − ρ)) = 1/π inside the sphere. With paths cut
+/// after k scattering vertices the sum stops at ρ^k: L_k = (I/πR²) Σ_{j=1..k} ρ^j.
+pub fn furnace_radiance(max_vertices: Option<u32>) -> f64 {
+    let rho = 0.5f64;
+    let scale = 1.0 / std::f64::consts::PI;
+    match max_vertices {
+        None => scale * rho / (1.0 - rho),
+        Some(k) => scale * (1..=k).map(|j| rho.powi(j as i32)).sum::<f64>(),
     }
 }
 

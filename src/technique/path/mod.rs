@@ -50,7 +50,7 @@
 //! openings are noisy.
 mod lanes;
 mod length;
-mod packets;
+pub(crate) mod packets;
 
 pub use length::{max_path_length, MAX_PATH_LENGTH, MIN_PATH_LENGTH};
 
@@ -134,7 +134,7 @@ impl PathStats {
         }
     }
 
-    fn merge(mut self, o: PathStats) -> PathStats {
+    pub(crate) fn merge(mut self, o: PathStats) -> PathStats {
         self.rays = self.rays.merge(o.rays);
         self.paths += o.paths;
         self.lane_steps += o.lane_steps;

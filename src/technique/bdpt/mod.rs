@@ -1,0 +1,227 @@
+//! `bdpt`: bidirectional path tracing with light-subpath permutation and path regeneration.
+//!
+//! Papers: E. Veach, "Robust Monte Carlo Methods for Light Transport Simulation" (1997), ch. 10;
+//! J. Novák, V. Havran, C. Dachsbacher, "Path Regeneration for Interactive Path Tracing" (2010),
+//! §3.4 (`shared/papers/path-regeneration-interactive-path-tracing.md`).
+//!
+//! # Algorithm (per pass)
+//! 1. Split the image into packet queues as `path` does (`path/packets.rs`), and trace a batch
+//!    of `light_batch` light subpaths per queue (`vertex.rs`): a light by power, a point and
+//!    direction by its emission distribution, BSDF sampling, Russian roulette, at most l_m
+//!    surface vertices; lights absorb.
+//! 2. Trace eye subpaths W at a time with regeneration, exactly as `path`: a regeneration
+//!    phase refills ended lanes from the queue, a closing phase of at most l_m + 1 steps ends.
+//! 3. At every eye vertex t (`lane.rs`), evaluate the strategies ending there: (0, t) when it
+//!    is on a light; (1, t), a light sample (next-event estimation); and (s, t) for s ≥ 2, a
+//!    connection to each vertex of one light subpath of the batch. With `permute` (the
+//!    paper's §3.4) that light subpath is picked at random at every bounce instead of being
+//!    the eye path's own, which breaks the correlation between an eye path's connections.
+//! 4. Each strategy is weighted by the power heuristic over all strategies with t ≥ 2 that
+//!    make the same path (`vertex.rs::mis_weight`); specular vertices are never connected.
+//!
+//! # Why permutation keeps the estimate unbiased
+//! The light subpaths of a batch are independent and identically distributed. For a fixed eye
+//! vertex, the connection estimator's expectation over a light subpath drawn from that
+//! distribution is the same whichever member of the batch is used, and choosing the member
+//! uniformly at random (independently of the light subpaths' contents) is again a draw from it.
+//! Reusing batch members across eye vertices and pixels correlates the estimates but does not
+//! change any expectation (linearity). The MIS weights depend only on the vertices of the path
+//! being weighted, not on which subpath supplied them, so they still sum to one.
+//!
+//! # Parameters (defaults)
+//! | field | default | meaning |
+//! |---|---|---|
+//! | `spp` | 1 | eye paths per pixel per tick |
+//! | `regeneration` | true | refill ended lanes during the regeneration phase |
+//! | `regeneration_steps` | 100 | T_r; sets the queue length |
+//! | `packet_width` | 8 | lanes per packet: 1, 8 or 16 |
+//! | `admitted_truncation` | 0.01 | c of l_m = ⌈log_{ρ_S} c⌉ |
+//! | `max_path_length` | none | overrides l_m (surface vertices of a full path) |
+//! | `light_batch` | 32 | light subpaths traced per packet queue |
+//! | `permute` | true | pick a random light subpath at every eye bounce (§3.4) |
+//!
+//! # Bias and consistency
+//! Unbiased except for the truncation at l_m surface vertices (as `path`). Strategies with
+//! t = 1 (light subpaths splatted onto the camera) are not used; the weights are normalised over
+//! the strategies that are, so nothing is lost but their variance reduction for caustics seen
+//! directly.
+//!
+//! # Failure modes
+//! Without t = 1, caustics seen directly (light → specular → diffuse → camera) are found only by
+//! eye paths and stay noisy; point lights reached only through mirrors are never found (no
+//! strategy can make those paths); a small `light_batch` correlates the noise between pixels.
+mod lane;
+mod vertex;
+
+use super::path::packets::{trace_chunk, LaneSettings};
+use super::path::{max_path_length, queue_pixels, PathConfig, PathStats};
+use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
+use crate::core::Rng;
+use crate::film::Film;
+use crate::scene::edits::SceneDelta;
+use crate::scene::Scene;
+use lane::{BdptContext, BdptLane};
+use serde::{Deserialize, Serialize};
+
+/// Configuration of the `bdpt` technique. Unknown fields are rejected.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct BdptConfig {
+    pub spp: u32,
+    pub regeneration: bool,
+    pub regeneration_steps: u32,
+    pub packet_width: u32,
+    pub admitted_truncation: f32,
+    pub max_path_length: Option<u32>,
+    pub light_batch: u32,
+    pub permute: bool,
+}
+
+impl Default for BdptConfig {
+    fn default() -> BdptConfig {
+        let p = PathConfig::default();
+        BdptConfig {
+            spp: p.spp,
+            regeneration: p.regeneration,
+            regeneration_steps: p.regeneration_steps,
+            packet_width: p.packet_width,
+            admitted_truncation: p.admitted_truncation,
+            max_path_length: p.max_path_length,
+            light_batch: 32,
+            permute: true,
+        }
+    }
+}
+
+/// Largest accepted light batch.
+pub const MAX_LIGHT_BATCH: u32 = 4096;
+
+impl BdptConfig {
+    /// The eye-path settings `bdpt` shares with `path`.
+    fn eye_settings(&self) -> PathConfig {
+        PathConfig {
+            spp: self.spp,
+            regeneration: self.regeneration,
+            regeneration_steps: self.regeneration_steps,
+            packet_width: self.packet_width,
+            admitted_truncation: self.admitted_truncation,
+            max_path_length: self.max_path_length,
+            preview_filter: None,
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), TechniqueError> {
+        self.eye_settings().validate()?;
+        if self.light_batch == 0 || self.light_batch > MAX_LIGHT_BATCH {
+            return Err(TechniqueError::InvalidConfig {
+                field: "light_batch".into(),
+                message: format!("must lie in 1..={MAX_LIGHT_BATCH}"),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// What a `bdpt` render did: the eye-path lane figures (as `path` reports them) and the light
+/// subpaths traced.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct BdptStats {
+    pub lanes: PathStats,
+    pub light_subpaths: u64,
+    pub light_subpath_rays: u64,
+}
+
+/// Separates light-subpath random streams from eye-path streams keyed by the same numbers.
+const LIGHT_STREAM: u64 = 0x4c49_4748_5400; // "LIGHT"
+
+/// The `bdpt` technique.
+pub struct Bdpt {
+    config: BdptConfig,
+    /// Passes traced since the film was last reset; keys the sample streams.
+    passes: u64,
+}
+
+impl Bdpt {
+    pub fn new(config: BdptConfig, _scene: &Scene) -> Result<Bdpt, TechniqueError> {
+        config.validate()?;
+        Ok(Bdpt { config, passes: 0 })
+    }
+}
+
+impl Technique for Bdpt {
+    fn id(&self) -> &'static str {
+        "bdpt"
+    }
+
+    fn update(&mut self, _ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
+        if !delta.is_empty() {
+            self.passes = 0;
+        }
+        Ok(())
+    }
+
+    fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
+        let rho = ctx.scene.mean_reflectance();
+        let l_m = self.config.max_path_length.unwrap_or_else(|| max_path_length(rho, self.config.admitted_truncation));
+        let settings =
+            LaneSettings { lanes: self.config.packet_width as usize, regeneration: self.config.regeneration };
+        let queue = queue_pixels(self.config.packet_width, self.config.regeneration_steps, rho);
+        let mut total = BdptStats::default();
+        for _ in 0..self.config.spp {
+            let pass = self.passes;
+            let stats = film.accumulate_chunks(
+                queue as usize,
+                |first, chunk| {
+                    // This queue's batch of light subpaths, each from its own stream.
+                    let mut light_rays = 0;
+                    let batch: Vec<_> = (0..self.config.light_batch as u64)
+                        .map(|k| {
+                            let stream = (first as u64) << 16 | k;
+                            let mut rng = Rng::for_sample(ctx.seed, ctx.tick, stream, pass ^ LIGHT_STREAM);
+                            let (path, rays) = vertex::light_subpath(ctx.scene, ctx.accel, l_m as usize, &mut rng);
+                            light_rays += rays;
+                            path
+                        })
+                        .collect();
+                    let lane_ctx = BdptContext {
+                        scene: ctx.scene,
+                        accel: ctx.accel,
+                        max_path_length: l_m,
+                        batch: &batch,
+                        permute: self.config.permute,
+                    };
+                    let lanes = trace_chunk::<BdptLane>(
+                        ctx.scene,
+                        ctx.accel.scene(),
+                        &lane_ctx,
+                        &settings,
+                        (ctx.seed, ctx.tick, pass),
+                        first,
+                        chunk,
+                    );
+                    BdptStats { lanes, light_subpaths: batch.len() as u64, light_subpath_rays: light_rays }
+                },
+                BdptStats::merge,
+            );
+            total = total.merge(stats);
+            self.passes += 1;
+            film.passes += 1;
+        }
+        total.lanes.max_path_length = l_m;
+        total.lanes.queue_pixels = queue;
+        total.lanes.mean_reflectance = rho;
+        let mut rays = total.lanes.rays;
+        rays.secondary += total.light_subpath_rays;
+        Ok(RenderStats { rays, detail: TechniqueStats::Bdpt(Box::new(total)) })
+    }
+}
+
+impl BdptStats {
+    fn merge(self, o: BdptStats) -> BdptStats {
+        BdptStats {
+            lanes: self.lanes.merge(o.lanes),
+            light_subpaths: self.light_subpaths + o.light_subpaths,
+            light_subpath_rays: self.light_subpath_rays + o.light_subpath_rays,
+        }
+    }
+}

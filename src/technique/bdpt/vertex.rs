@@ -1,0 +1,241 @@
+//! Subpath vertices, their densities in area measure, light subpaths, and the MIS weight of a
+//! connection strategy (Veach 1997, §10.2; the ratio form of pbrt's `MISWeight`).
+//!
+//! A vertex stores the throughput `beta` of its subpath up to it, the density `pdf_fwd` with
+//! which its own subpath sampled it and `pdf_rev` with which the other direction would have
+//! (both per unit area, so they compare across strategies), and whether it is specular
+//! (`delta`: it cannot be connected to). Directions point away from the vertex.
+use crate::core::{offset_ray_origin, Rgb, Rng};
+use crate::embree::Ray;
+use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
+use glam::Vec3;
+
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum VertexKind {
+    Camera,
+    /// On light `l` (the start of a light subpath, or where an eye subpath hit an area light).
+    Light(u32),
+    Surface(u32),
+}
+
+#[derive(Clone, Copy, Debug)]
+pub struct Vertex {
+    pub kind: VertexKind,
+    pub p: Vec3,
+    /// Unit geometric normal; zero for the camera and point and spot lights.
+    pub n: Vec3,
+    /// Unit direction towards the previous vertex of its subpath (zero at the subpath's start).
+    pub wo: Vec3,
+    pub beta: Rgb,
+    pub pdf_fwd: f32,
+    pub pdf_rev: f32,
+    pub delta: bool,
+}
+
+/// Which way a subpath carries light: radiance for eye subpaths, importance for light ones
+/// (the refraction scaling 1/η² applies to radiance only).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Transport {
+    Radiance,
+    Importance,
+}
+
+pub fn material<'a>(scene: &'a Scene, v: &Vertex) -> Option<&'a Material> {
+    match v.kind {
+        VertexKind::Surface(o) => Some(&scene.materials[scene.objects[o as usize].material as usize]),
+        _ => None,
+    }
+}
+
+/// A solid-angle density at `from` towards `to`, turned into a density per unit area at `to`.
+pub fn to_area(pdf_dir: f32, from: &Vertex, to: &Vertex) -> f32 {
+    let d = to.p - from.p;
+    let dist2 = d.length_squared();
+    if dist2 == 0.0 {
+        return 0.0;
+    }
+    let cos = if to.n == Vec3::ZERO { 1.0 } else { to.n.dot(d).abs() / dist2.sqrt() };
+    pdf_dir * cos / dist2
+}
+
+/// Density per unit area with which `from` samples `to`, having been reached from `prev` (for a
+/// surface; a light samples by its emission distribution and needs no `prev`).
+pub fn pdf_area(scene: &Scene, from: &Vertex, prev: Option<&Vertex>, to: &Vertex) -> f32 {
+    let next = (to.p - from.p).normalize_or_zero();
+    let pdf_dir = match from.kind {
+        VertexKind::Surface(_) => {
+            let (Some(m), Some(prev)) = (material(scene, from), prev) else { return 0.0 };
+            m.pdf(from.n, (prev.p - from.p).normalize_or_zero(), next)
+        }
+        VertexKind::Light(l) => scene.lights[l as usize].geometry.pdf_emission_direction(from.n, next),
+        VertexKind::Camera => 0.0,
+    };
+    to_area(pdf_dir, from, to)
+}
+
+/// Density per unit area of choosing light vertex `v` as a light subpath's start.
+pub fn pdf_light_origin(scene: &Scene, v: &Vertex) -> f32 {
+    let VertexKind::Light(l) = v.kind else { return 0.0 };
+    let pmf = scene.light_selection.as_ref().map_or(0.0, |d| d.pmf(l as usize));
+    pmf * scene.lights[l as usize].geometry.pdf_position()
+}
+
+fn is_delta_light(scene: &Scene, v: &Vertex) -> bool {
+    matches!(v.kind, VertexKind::Light(l) if scene.lights[l as usize].geometry.is_delta())
+}
+
+/// The power-heuristic weight of strategy (s, t) = (`light.len()`, `eye.len()`) for the path the
+/// two subpaths make when connected, among the strategies `bdpt` uses: every (s', t') with
+/// s' + t' = s + t and t' ≥ 2 (no light tracing to the camera; the weights still sum to 1 over
+/// the strategies that can make the path, so the estimate stays unbiased).
+pub fn mis_weight(scene: &Scene, eye: &[Vertex], light: &[Vertex]) -> f32 {
+    let (s, t) = (light.len(), eye.len());
+    if s + t == 2 || t < 2 {
+        return 1.0;
+    }
+    let remap = |x: f32| if x != 0.0 { x } else { 1.0 };
+    // The connection changes the reverse densities of the (up to) four vertices next to it.
+    let mut e_last = eye[t - 1];
+    let mut e_prev = eye[t - 2];
+    let mut l_last = light.last().copied();
+    let mut l_prev = if s >= 2 { Some(light[s - 2]) } else { None };
+    match &l_last {
+        Some(ll) => {
+            e_last.pdf_rev = pdf_area(scene, ll, l_prev.as_ref(), &e_last);
+            e_prev.pdf_rev = pdf_area(scene, &e_last, Some(ll), &e_prev);
+        }
+        None => {
+            e_last.pdf_rev = pdf_light_origin(scene, &e_last);
+            e_prev.pdf_rev = pdf_area(scene, &e_last, None, &e_prev);
+        }
+    }
+    if let Some(ll) = l_last.as_mut() {
+        ll.pdf_rev = pdf_area(scene, &e_last, Some(&e_prev), ll);
+    }
+    if let (Some(lp), Some(ll)) = (l_prev.as_mut(), l_last.as_ref()) {
+        lp.pdf_rev = pdf_area(scene, ll, Some(&e_last), lp);
+    }
+    let eye_at = |i: usize| match i {
+        _ if i == t - 1 => e_last,
+        _ if i == t - 2 => e_prev,
+        _ => eye[i],
+    };
+    let light_at = |i: usize| match (l_last, l_prev) {
+        (Some(ll), _) if i == s - 1 => ll,
+        (_, Some(lp)) if i == s - 2 => lp,
+        _ => light[i],
+    };
+    let mut sum = 0.0f32;
+    let mut r = 1.0f32;
+    for i in (2..t).rev() {
+        r *= remap(eye_at(i).pdf_rev) / remap(eye_at(i).pdf_fwd);
+        if !eye_at(i).delta && !eye_at(i - 1).delta {
+            sum += r * r;
+        }
+    }
+    r = 1.0;
+    for i in (0..s).rev() {
+        r *= remap(light_at(i).pdf_rev) / remap(light_at(i).pdf_fwd);
+        let delta_before = if i > 0 { light_at(i - 1).delta } else { is_delta_light(scene, &light_at(0)) };
+        if !light_at(i).delta && !delta_before {
+            sum += r * r;
+        }
+    }
+    1.0 / (1.0 + sum)
+}
+
+/// A scattering step from surface vertex `v`: the next ray, the BSDF weight (with the 1/η²
+/// refraction scaling only for radiance), the solid-angle densities forward and reverse (zero
+/// for specular lobes), and whether it was specular. `None` when the BSDF gives nothing.
+pub fn scatter(scene: &Scene, v: &Vertex, transport: Transport, rng: &mut Rng) -> Option<(Ray, Rgb, f32, f32, bool)> {
+    let m = material(scene, v)?;
+    let bs = m.sample(v.n, v.wo, rng.next_2d(), rng.next_f32())?;
+    let mut weight = bs.weight;
+    if transport == Transport::Importance && bs.eta != 1.0 {
+        weight *= bs.eta * bs.eta;
+    }
+    let (pdf_fwd, pdf_rev) = if bs.specular { (0.0, 0.0) } else { (bs.pdf, m.pdf(v.n, bs.wi, v.wo)) };
+    let side = if v.n.dot(bs.wi) >= 0.0 { v.n } else { -v.n };
+    Some((Ray::new(offset_ray_origin(v.p, side), bs.wi), weight, pdf_fwd, pdf_rev, bs.specular))
+}
+
+/// The vertex where `ray` (leaving `prev` with solid-angle density `pdf_dir`) hits, carrying
+/// `beta`; `None` if it leaves the scene.
+pub fn hit_vertex(
+    scene: &Scene,
+    accel: &SceneAccel,
+    ray: &Ray,
+    hit: Option<crate::embree::Hit>,
+    prev: &Vertex,
+    beta: Rgb,
+    pdf_dir: f32,
+) -> Option<Vertex> {
+    let (h, (surface, prim)) = hit.and_then(|h| Some((h, accel.resolve(&h)?)))?;
+    let sp = scene.surface_point(surface, prim, h.u, h.v);
+    let kind = match surface {
+        SurfaceId::Object(o) => VertexKind::Surface(o),
+        SurfaceId::Light(l) => VertexKind::Light(l),
+    };
+    let mut v =
+        Vertex { kind, p: sp.p, n: sp.n, wo: -ray.dir.normalize(), beta, pdf_fwd: 0.0, pdf_rev: 0.0, delta: false };
+    v.pdf_fwd = to_area(pdf_dir, prev, &v);
+    Some(v)
+}
+
+/// Traces one light subpath of at most `max_vertices` vertices after the light's: a light by
+/// power, a point and direction by its emission distribution, then BSDF sampling with Russian
+/// roulette by throughput. Lights absorb: a light subpath stops where it meets one. Returns the
+/// vertices and the rays traced.
+pub fn light_subpath(scene: &Scene, accel: &SceneAccel, max_vertices: usize, rng: &mut Rng) -> (Vec<Vertex>, u64) {
+    let mut path = Vec::new();
+    let Some(select) = &scene.light_selection else { return (path, 0) };
+    let (l, pmf, _) = select.sample(rng.next_f32());
+    let geometry = &scene.lights[l].geometry;
+    let Some((origin, dir, weight)) = geometry.sample_emission(rng.next_2d(), rng.next_2d()) else { return (path, 0) };
+    let n = geometry.surface_normal();
+    path.push(Vertex {
+        kind: VertexKind::Light(l as u32),
+        p: origin,
+        n,
+        wo: Vec3::ZERO,
+        beta: weight / pmf,
+        pdf_fwd: pmf * geometry.pdf_position(),
+        pdf_rev: 0.0,
+        delta: false,
+    });
+    let mut ray = Ray::new(origin, dir);
+    let mut beta = weight / pmf;
+    let mut pdf_dir = geometry.pdf_emission_direction(n, dir);
+    let mut rays = 0;
+    while path.len() <= max_vertices {
+        rays += 1;
+        let hit = accel.scene().intersect1(&ray);
+        let prev = path[path.len() - 1];
+        let Some(mut v) = hit_vertex(scene, accel, &ray, hit, &prev, beta, pdf_dir) else { break };
+        if !matches!(v.kind, VertexKind::Surface(_)) {
+            break;
+        }
+        let Some((next, weight, fwd, rev, specular)) = scatter(scene, &v, Transport::Importance, rng) else {
+            path.push(v);
+            break;
+        };
+        v.delta = specular;
+        path.push(v);
+        let k = path.len() - 1;
+        path[k - 1].pdf_rev = to_area(rev, &path[k], &path[k - 1]);
+        beta *= weight;
+        let q = beta.max_component().min(1.0);
+        if k > 1 && q < 1.0 {
+            if rng.next_f32() >= q {
+                break;
+            }
+            beta = beta / q;
+        }
+        if beta.is_black() {
+            break;
+        }
+        ray = next;
+        pdf_dir = fwd;
+    }
+    (path, rays)
+}
