@@ -108,3 +108,22 @@ fn regeneration_changes_the_order_not_the_image_and_keeps_lanes_busier() {
     eprintln!("utilisation: regeneration {:.3}, none {:.3}", utilisation(&on), utilisation(&off));
     assert!(utilisation(&on) > utilisation(&off));
 }
+
+#[test]
+fn it_accumulates_progressively_and_restarts_when_the_scene_changes() {
+    // Property: the same progressive contract as `path`: passes accumulate while nothing
+    // changes (spp grows, accumulation id stays), and any edit restarts the film.
+    let mut scene = load("cornell-box.json");
+    scene.set_resolution(16, 16);
+    let device = relume::embree::Device::new(1).unwrap();
+    let mut s = relume::engine::Session::new(scene, &TechniqueConfig::Bdpt(bdpt(2)), 1, &device).unwrap();
+    let first = s.tick().unwrap();
+    let second = s.tick().unwrap();
+    assert_eq!((first.spp, second.spp), (2, 4));
+    assert_eq!(first.accumulation_id, second.accumulation_id);
+    s.queue_edits(vec![camera_dolly()]).unwrap();
+    let after = s.tick().unwrap();
+    assert_eq!(after.spp, 2);
+    assert_ne!(after.accumulation_id, second.accumulation_id);
+    assert_finite_non_negative(&after.image);
+}

@@ -98,3 +98,19 @@ async fn routes_match_the_spec() {
     assert_eq!(r.status(), 204);
     s.shutdown().await.unwrap();
 }
+
+#[test]
+fn every_technique_configuration_is_documented() {
+    // Property: the spec's TechniqueConfig accepts each technique's defaults as the server
+    // serialises them, and refuses an unknown id: a new technique cannot land undocumented.
+    let spec: serde_json::Value = serde_json::to_value(spec()).unwrap();
+    let schema = &spec["components"]["schemas"]["TechniqueConfig"];
+    let validator = jsonschema::validator_for(schema).expect("TechniqueConfig is a valid schema");
+    for id in relume::technique::TECHNIQUE_IDS {
+        let config = relume::technique::TechniqueConfig::from_spec(id).unwrap();
+        let value = serde_json::to_value(&config).unwrap();
+        let errors: Vec<String> = validator.iter_errors(&value).map(|e| e.to_string()).collect();
+        assert!(errors.is_empty(), "{id}: {value} against the spec: {errors:?}");
+    }
+    assert!(!validator.is_valid(&serde_json::json!({"id": "warp"})));
+}
