@@ -6,6 +6,8 @@
 //! (verify, invalidate, retrace), then `render` adds samples to the film. Per-tick calls go
 //! through `Box<dyn Technique>`; per-ray variety inside a technique is a closed `enum`.
 pub mod bdpt;
+pub mod camera_chain;
+pub mod instant_cache;
 pub mod nee;
 pub mod path;
 pub mod photon_reuse;
@@ -72,10 +74,11 @@ pub enum TechniqueStats {
     Path(path::PathStats),
     PhotonReuse(Box<photon_reuse::PhotonStats>),
     Bdpt(Box<bdpt::BdptStats>),
+    InstantCache(Box<instant_cache::InstantCacheStats>),
 }
 
 /// The ids [`TechniqueConfig`] accepts.
-pub const TECHNIQUE_IDS: &[&str] = &["path", "photon_reuse", "bdpt"];
+pub const TECHNIQUE_IDS: &[&str] = &["path", "photon_reuse", "bdpt", "instant_cache"];
 
 impl TechniqueStats {
     /// Bytes the technique keeps resident between ticks (its light-transport state; the film
@@ -85,6 +88,7 @@ impl TechniqueStats {
             TechniqueStats::Path(_) => 0,
             TechniqueStats::PhotonReuse(s) => s.memory.total() + s.grid_bytes,
             TechniqueStats::Bdpt(_) => 0,
+            TechniqueStats::InstantCache(s) => s.vpl_bytes + s.cache_bytes,
         }
     }
 }
@@ -96,6 +100,7 @@ pub enum TechniqueConfig {
     Path(path::PathConfig),
     PhotonReuse(photon_reuse::PhotonReuseConfig),
     Bdpt(bdpt::BdptConfig),
+    InstantCache(instant_cache::InstantCacheConfig),
 }
 
 impl TechniqueConfig {
@@ -104,6 +109,7 @@ impl TechniqueConfig {
             TechniqueConfig::Path(_) => "path",
             TechniqueConfig::PhotonReuse(_) => "photon_reuse",
             TechniqueConfig::Bdpt(_) => "bdpt",
+            TechniqueConfig::InstantCache(_) => "instant_cache",
         }
     }
 
@@ -113,6 +119,7 @@ impl TechniqueConfig {
             TechniqueConfig::Path(c) => c.spp,
             TechniqueConfig::PhotonReuse(c) => c.spp,
             TechniqueConfig::Bdpt(c) => c.spp,
+            TechniqueConfig::InstantCache(c) => c.spp,
         }
     }
 
@@ -122,6 +129,7 @@ impl TechniqueConfig {
             TechniqueConfig::Path(c) => c.spp = spp,
             TechniqueConfig::PhotonReuse(c) => c.spp = spp,
             TechniqueConfig::Bdpt(c) => c.spp = spp,
+            TechniqueConfig::InstantCache(c) => c.spp = spp,
         }
     }
 
@@ -131,13 +139,14 @@ impl TechniqueConfig {
             TechniqueConfig::Path(c) => c.validate(),
             TechniqueConfig::PhotonReuse(c) => c.validate(),
             TechniqueConfig::Bdpt(c) => c.validate(),
+            TechniqueConfig::InstantCache(c) => c.validate(),
         }
     }
 
     /// Resident photon paths the technique keeps (0 for techniques without any).
     pub fn photon_paths(&self) -> u32 {
         match self {
-            TechniqueConfig::Path(_) | TechniqueConfig::Bdpt(_) => 0,
+            TechniqueConfig::Path(_) | TechniqueConfig::Bdpt(_) | TechniqueConfig::InstantCache(_) => 0,
             TechniqueConfig::PhotonReuse(c) => c.paths,
         }
     }
@@ -166,5 +175,6 @@ pub fn build(config: &TechniqueConfig, scene: &Scene) -> Result<Box<dyn Techniqu
         TechniqueConfig::Path(c) => Ok(Box::new(path::PathTracer::new(c.clone(), scene)?)),
         TechniqueConfig::PhotonReuse(c) => Ok(Box::new(photon_reuse::PhotonReuse::new(c.clone(), scene)?)),
         TechniqueConfig::Bdpt(c) => Ok(Box::new(bdpt::Bdpt::new(c.clone(), scene)?)),
+        TechniqueConfig::InstantCache(c) => Ok(Box::new(instant_cache::InstantCache::new(c.clone(), scene)?)),
     }
 }

@@ -13,6 +13,7 @@ use serde_json::{Map, Value};
 fn shorthand_fields(id: &str) -> Option<(&'static str, &'static str)> {
     match id {
         "photon_reuse" => Some(("reuse", "threshold")),
+        "instant_cache" => Some(("mode", "vpls")),
         _ => None,
     }
 }
@@ -65,6 +66,10 @@ impl TechniqueConfig {
     pub fn label(&self) -> String {
         match self {
             TechniqueConfig::Path(c) => format!("path:spp={}", c.spp),
+            TechniqueConfig::InstantCache(c) => {
+                let mode = serde_json::to_value(c.mode).ok().and_then(|v| v.as_str().map(str::to_string));
+                format!("instant_cache:{}@{}", mode.unwrap_or_default(), c.vpls)
+            }
             TechniqueConfig::Bdpt(c) => {
                 format!("bdpt:spp={}{}", c.spp, if c.permute { "" } else { ":permute=false" })
             }

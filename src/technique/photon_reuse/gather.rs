@@ -10,19 +10,15 @@
 //! spatial hash grid (cell size 2r, so a query visits at most 8 cells) is the natural
 //! equivalent, and it costs work per pixel rather than per photon.
 use super::store::PathStore;
-use crate::core::{offset_ray_origin, Rgb, Rng};
-use crate::embree::Ray;
+use crate::core::{Rgb, Rng};
 use crate::film::PixelAccum;
 use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
-use crate::technique::nee::sample_next_event;
+use crate::technique::camera_chain;
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 
 /// Least cosine between a photon's surface normal and the query's for the photon to count.
 const FACING_COSINE: f32 = 0.5;
-
-/// Longest specular chain a camera ray follows before it gives up.
-const MAX_SPECULAR_CHAIN: u32 = 16;
 
 #[derive(Clone, Copy, Debug)]
 struct GridPhoton {
@@ -185,48 +181,19 @@ pub fn render_chunk(
     chunk: &mut [PixelAccum],
 ) -> RenderRays {
     let (seed, tick, pass) = stream;
-    let width = scene.camera.width as usize;
     let mut rays = RenderRays::default();
     for (offset, pixel) in chunk.iter_mut().enumerate() {
         let index = first + offset;
         let mut rng = Rng::for_sample(seed, tick, index as u64, pass);
-        let j = rng.next_2d();
-        let mut ray = scene.camera.ray((index % width) as f32 + j.x, (index / width) as f32 + j.y);
-        let mut beta = Rgb::WHITE;
-        let mut radiance = Rgb::BLACK;
+        let sample = camera_chain::trace(scene, accel, index, &mut rng);
         rays.camera += 1;
-        for depth in 0..MAX_SPECULAR_CHAIN {
-            if depth > 0 {
-                rays.specular += 1;
-            }
-            let Some(hit) = accel.scene().intersect1(&ray) else { break };
-            let Some((surface, prim)) = accel.resolve(&hit) else { break };
-            let sp = scene.surface_point(surface, prim, hit.u, hit.v);
-            let wo = -ray.dir;
-            let SurfaceId::Object(object) = surface else {
-                // Seen directly or through mirrors and glass: NEE cannot reach it there.
-                if let SurfaceId::Light(l) = surface {
-                    radiance += beta * scene.lights[l as usize].geometry.emitted(sp.n, wo);
-                }
-                break;
-            };
-            let material = &scene.materials[scene.objects[object as usize].material as usize];
-            if material.is_specular() {
-                let Some(bs) = material.sample(sp.n, wo, rng.next_2d(), rng.next_f32()) else { break };
-                beta *= bs.weight;
-                let side = if sp.n.dot(bs.wi) >= 0.0 { sp.n } else { -sp.n };
-                ray = Ray::new(offset_ray_origin(sp.p, side), bs.wi);
-                continue;
-            }
+        rays.specular += sample.specular_rays;
+        let mut radiance = sample.emitted;
+        if let Some(hit) = sample.hit {
             // Diffuse: direct light by NEE, indirect light from the photons.
-            if let Some(ne) = sample_next_event(scene, material, sp.p, sp.n, wo, &mut rng, false) {
-                rays.shadow += 1;
-                if !accel.scene().occluded1(&ne.shadow) {
-                    radiance += beta * ne.contribution;
-                }
-            }
-            radiance += beta * grid.radiance(material, sp.p, sp.n, wo);
-            break;
+            let (direct, traced) = camera_chain::direct_light(scene, accel, &hit, &mut rng);
+            rays.shadow += u64::from(traced);
+            radiance += direct + hit.beta * grid.radiance(hit.material(scene), hit.p, hit.n, hit.wo);
         }
         pixel.add(radiance);
         pixel.count += 1.0;

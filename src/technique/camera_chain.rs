@@ -1,0 +1,95 @@
+//! Camera samples through ideal mirror and glass chains to the first diffuse surface, shared by
+//! the techniques that shade diffuse surfaces from a cache (`photon_reuse`, `instant_cache`).
+//! Lights seen directly or through the chain add their emission (next-event estimation cannot
+//! reach them there); the chain gives up after [`MAX_SPECULAR_CHAIN`] specular bounces.
+use crate::core::{offset_ray_origin, Rgb, Rng};
+use crate::embree::Ray;
+use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
+use crate::technique::nee::sample_next_event;
+use glam::Vec3;
+
+/// Longest specular chain a camera ray follows before it gives up.
+pub const MAX_SPECULAR_CHAIN: u32 = 16;
+
+/// The first diffuse surface a camera sample reaches.
+#[derive(Clone, Copy, Debug)]
+pub struct DiffuseHit {
+    pub p: Vec3,
+    /// Unit geometric normal.
+    pub n: Vec3,
+    /// Unit direction back along the arriving ray.
+    pub wo: Vec3,
+    pub object: u32,
+    /// Throughput of the specular chain (white when the camera sees the surface directly).
+    pub beta: Rgb,
+}
+
+impl DiffuseHit {
+    pub fn material<'a>(&self, scene: &'a Scene) -> &'a Material {
+        &scene.materials[scene.objects[self.object as usize].material as usize]
+    }
+
+    /// The normal on the side the sample arrives from.
+    pub fn facing(&self) -> Vec3 {
+        if self.n.dot(self.wo) >= 0.0 {
+            self.n
+        } else {
+            -self.n
+        }
+    }
+}
+
+/// What one camera sample found.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct CameraSample {
+    /// Emission of lights met along the chain, weighted by its throughput.
+    pub emitted: Rgb,
+    pub hit: Option<DiffuseHit>,
+    /// Rays traced after the camera ray.
+    pub specular_rays: u64,
+}
+
+/// Traces a jittered camera ray through pixel `index` (row-major) and its specular chain.
+pub fn trace(scene: &Scene, accel: &SceneAccel, index: usize, rng: &mut Rng) -> CameraSample {
+    let width = scene.camera.width as usize;
+    let j = rng.next_2d();
+    let mut ray = scene.camera.ray((index % width) as f32 + j.x, (index / width) as f32 + j.y);
+    let mut out = CameraSample::default();
+    let mut beta = Rgb::WHITE;
+    for depth in 0..MAX_SPECULAR_CHAIN {
+        if depth > 0 {
+            out.specular_rays += 1;
+        }
+        let Some(hit) = accel.scene().intersect1(&ray) else { break };
+        let Some((surface, prim)) = accel.resolve(&hit) else { break };
+        let sp = scene.surface_point(surface, prim, hit.u, hit.v);
+        let wo = -ray.dir;
+        let SurfaceId::Object(object) = surface else {
+            if let SurfaceId::Light(l) = surface {
+                out.emitted += beta * scene.lights[l as usize].geometry.emitted(sp.n, wo);
+            }
+            break;
+        };
+        let material = &scene.materials[scene.objects[object as usize].material as usize];
+        if !material.is_specular() {
+            out.hit = Some(DiffuseHit { p: sp.p, n: sp.n, wo, object, beta });
+            break;
+        }
+        let Some(bs) = material.sample(sp.n, wo, rng.next_2d(), rng.next_f32()) else { break };
+        beta *= bs.weight;
+        let side = if sp.n.dot(bs.wi) >= 0.0 { sp.n } else { -sp.n };
+        ray = Ray::new(offset_ray_origin(sp.p, side), bs.wi);
+    }
+    out
+}
+
+/// Direct light at a diffuse hit by next-event estimation (one light by power, one shadow
+/// ray), times the chain's throughput. Returns the radiance and whether a shadow ray was traced.
+pub fn direct_light(scene: &Scene, accel: &SceneAccel, hit: &DiffuseHit, rng: &mut Rng) -> (Rgb, bool) {
+    let material = hit.material(scene);
+    match sample_next_event(scene, material, hit.p, hit.n, hit.wo, rng, false) {
+        Some(ne) if !accel.scene().occluded1(&ne.shadow) => (hit.beta * ne.contribution, true),
+        Some(_) => (Rgb::BLACK, true),
+        None => (Rgb::BLACK, false),
+    }
+}

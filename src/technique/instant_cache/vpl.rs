@@ -1,0 +1,193 @@
+//! Virtual point lights (Keller 1997, instant radiosity; Debattista et al. §3.1): photons shot
+//! from the lights with a Halton sequence at fixed indices, leaving a VPL at every diffuse hit.
+//!
+//! Path i draws dimension d of its Halton point i + 1: 0 picks the light (by power), 1–2 the
+//! point, 3–4 the direction, then 4 per bounce (2 for the BSDF direction, 1 for the lobe,
+//! 1 for Russian roulette). When nothing changes the VPLs are the same every tick, and VPL k is the k-th
+//! deposited, so a VPL keeps its index (and its visibility rays stay comparable) until what it
+//! depends on changes. A VPL's `intensity` is Φ·ρ/π, the radiant intensity per unit cosine of
+//! the flux Φ it reflects diffusely; Φ is the light's power over the number of paths shot.
+use crate::core::{offset_ray_origin, Rgb};
+use crate::embree::Ray;
+use crate::scene::{Scene, SceneAccel, SurfaceId};
+use glam::{Vec2, Vec3};
+use std::f32::consts::FRAC_1_PI;
+
+const PRIMES: [u32; 48] = [
+    2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37, 41, 43, 47, 53, 59, 61, 67, 71, 73, 79, 83, 89, 97, 101, 103, 107, 109,
+    113, 127, 131, 137, 139, 149, 151, 157, 163, 167, 173, 179, 181, 191, 193, 197, 199, 211, 223,
+];
+
+/// Bounces a VPL path may take (the Halton dimensions run out after that).
+pub const MAX_VPL_BOUNCES: u32 = ((PRIMES.len() - 5) / 4) as u32;
+
+/// A digit permutation per Halton dimension, fixed (seeded) and keeping 0 in place so the
+/// infinitely many leading zero digits add nothing.
+fn digit_permutation(dim: usize) -> Vec<u32> {
+    let base = PRIMES[dim % PRIMES.len()];
+    let mut perm: Vec<u32> = (0..base).collect();
+    let mut rng = crate::core::Rng::new(0x4841_4c54_4f4e, dim as u64); // "HALTON"
+    for i in (2..base as usize).rev() {
+        let j = 1 + (rng.next_u32() as usize) % i;
+        perm.swap(i, j);
+    }
+    perm
+}
+
+/// Dimension `dim` of Halton point `index`: the radical inverse of `index` in the `dim`-th
+/// prime, its digits scrambled by a fixed permutation. Plain Halton's high dimensions move in
+/// step over the first points (bases 19 and 23 both start 1/b, 2/b, ...), which made the
+/// roulette of successive bounces agree and biased a 256-VPL furnace 4.7% high; the scrambling
+/// (Faure's remedy, here with seeded permutations) brings it within 0.2%.
+pub fn halton(index: u64, dim: usize) -> f32 {
+    thread_local! {
+        static PERMUTATIONS: Vec<Vec<u32>> = (0..PRIMES.len()).map(digit_permutation).collect();
+    }
+    let base = PRIMES[dim % PRIMES.len()] as u64;
+    PERMUTATIONS.with(|perms| {
+        let perm = &perms[dim % PRIMES.len()];
+        let (mut n, mut inv, mut result) = (index, 1.0f64 / base as f64, 0.0f64);
+        let step = inv;
+        while n > 0 {
+            result += perm[(n % base) as usize] as f64 * inv;
+            n /= base;
+            inv *= step;
+        }
+        (result as f32).min(1.0 - f32::EPSILON)
+    })
+}
+
+/// A virtual point light.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Vpl {
+    pub position: Vec3,
+    /// Unit normal on the side the photon arrived from (the side the VPL lights).
+    pub normal: Vec3,
+    /// Φ·ρ/π (W/sr per unit cosine).
+    pub intensity: Rgb,
+    pub object: u32,
+}
+
+/// Shoots `paths` photon paths (Halton points 1..=paths) and returns their VPLs (at most
+/// `max_vpls`) and the rays traced. The path count, not the VPL count, is fixed: stopping when a
+/// VPL budget is reached would divide by a random path count, and the estimate would be biased
+/// upwards (measured: +110% at 64 VPLs in the furnace).
+pub fn shoot(scene: &Scene, accel: &SceneAccel, paths: u64, max_vpls: usize, max_bounces: u32) -> (Vec<Vpl>, u64) {
+    let mut vpls: Vec<Vpl> = Vec::new();
+    let mut rays = 0u64;
+    let Some(select) = &scene.light_selection else { return (vpls, 0) };
+    let max_bounces = max_bounces.min(MAX_VPL_BOUNCES);
+    'paths: for index in 1..=paths {
+        let u = |d: usize| halton(index, d);
+        let (light, pmf, _) = select.sample(u(0));
+        let Some((origin, dir, weight)) =
+            scene.lights[light].geometry.sample_emission(Vec2::new(u(1), u(2)), Vec2::new(u(3), u(4)))
+        else {
+            continue;
+        };
+        let mut power = weight / pmf;
+        let mut ray = Ray::new(origin, dir);
+        for bounce in 0..max_bounces as usize {
+            rays += 1;
+            let Some(hit) = accel.scene().intersect1(&ray) else { break };
+            let Some((SurfaceId::Object(object), prim)) = accel.resolve(&hit) else { break };
+            let sp = scene.surface_point(SurfaceId::Object(object), prim, hit.u, hit.v);
+            let material = &scene.materials[scene.objects[object as usize].material as usize];
+            let wo = -ray.dir;
+            if !material.is_specular() {
+                if vpls.len() == max_vpls {
+                    break 'paths;
+                }
+                let facing = if sp.n.dot(wo) >= 0.0 { sp.n } else { -sp.n };
+                let intensity = power * material.diffuse_reflectance() * FRAC_1_PI;
+                vpls.push(Vpl { position: sp.p, normal: facing, intensity, object });
+            }
+            let d = 5 + 4 * bounce;
+            let Some(bs) = material.sample(sp.n, wo, Vec2::new(u(d), u(d + 1)), u(d + 2)) else { break };
+            let q = bs.weight.max_component().min(1.0);
+            if q <= 0.0 || u(d + 3) >= q {
+                break;
+            }
+            power = power * bs.weight / q;
+            let side = if sp.n.dot(bs.wi) >= 0.0 { sp.n } else { -sp.n };
+            ray = Ray::new(offset_ray_origin(sp.p, side), bs.wi);
+        }
+    }
+    let scale = 1.0 / paths.max(1) as f32;
+    for v in &mut vpls {
+        v.intensity *= scale;
+    }
+    (vpls, rays)
+}
+
+/// The visibility ray from `x` (unit normal `n` on the side it looks from) to `vpl`: both ends
+/// leave their surface on their lit side, so a ray between the two sides of one thin wall
+/// crosses it and is occluded.
+pub fn visibility_ray(x: Vec3, n: Vec3, vpl: &Vpl) -> Ray {
+    let from = offset_ray_origin(x, n);
+    let to = offset_ray_origin(vpl.position, vpl.normal);
+    let span = to - from;
+    let length = span.length().max(f32::MIN_POSITIVE);
+    Ray { origin: from, dir: span / length, tnear: 0.0, tfar: length * (1.0 - crate::technique::nee::SHADOW_EPSILON) }
+}
+
+/// The smoothstep clamp of the bounded geometry term (eq. 3): 0 below `a`, 1 above `b`.
+pub fn clamp_factor(a: f32, b: f32, x: f32) -> f32 {
+    if x > b {
+        1.0
+    } else if x < a {
+        0.0
+    } else {
+        let t = (x - a) / (b - a);
+        3.0 * t * t - 2.0 * t * t * t
+    }
+}
+
+/// Irradiance at `x` (unit normal `n`, on the side the query looks from) from `vpl`, without
+/// visibility: the bounded geometry term G′ (eq. 2) times the VPL's intensity. Returns the
+/// value and the unit direction towards the VPL, or `None` if it cannot contribute.
+pub fn irradiance_from(vpl: &Vpl, x: Vec3, n: Vec3, min_distance: f32) -> Option<(Rgb, Vec3, f32)> {
+    let d = vpl.position - x;
+    let dist2 = d.length_squared();
+    if dist2 <= 0.0 {
+        return None;
+    }
+    let dist = dist2.sqrt();
+    let w = d / dist;
+    let (cos_x, cos_y) = (n.dot(w), -vpl.normal.dot(w));
+    if cos_x <= 0.0 || cos_y <= 0.0 {
+        return None;
+    }
+    let g = cos_x * cos_y / dist2 * clamp_factor(0.8 * min_distance, 1.2 * min_distance, dist);
+    (g > 0.0).then(|| (vpl.intensity * g, w, dist))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn halton_points_are_stratified_and_their_dimensions_uncorrelated() {
+        // Base 2 has a single non-zero digit to permute: the plain radical inverse.
+        assert_eq!((halton(1, 0), halton(2, 0), halton(3, 0)), (0.5, 0.25, 0.75));
+        // Stratified: 1000 points of any dimension fill 10 bins evenly.
+        for dim in [2, 8, 20] {
+            let mut bins = [0; 10];
+            for i in 1..=1000 {
+                bins[(halton(i, dim) * 10.0) as usize] += 1;
+            }
+            assert!(bins.iter().all(|&b| (90..=110).contains(&b)), "dim {dim}: {bins:?}");
+        }
+        // The first points of two high dimensions are not in step (plain Halton's base 19 and
+        // 23 both start 1/b, 2/b, ...); the furnace test in tests/instant_cache.rs guards the
+        // bias that caused.
+        assert!((1..=8u64).any(|i| (halton(i, 7) < halton(i + 1, 7)) != (halton(i, 8) < halton(i + 1, 8))));
+    }
+
+    #[test]
+    fn the_clamp_is_smooth_and_bounded() {
+        assert_eq!(clamp_factor(1.0, 2.0, 0.5), 0.0);
+        assert_eq!(clamp_factor(1.0, 2.0, 2.5), 1.0);
+        assert!((clamp_factor(1.0, 2.0, 1.5) - 0.5).abs() < 1e-6);
+    }
+}
