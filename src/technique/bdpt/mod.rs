@@ -53,8 +53,8 @@
 mod lane;
 mod vertex;
 
-use super::path::packets::{trace_chunk, LaneSettings};
-use super::path::{max_path_length, queue_pixels, PathConfig, PathStats};
+use super::path::packets::trace_chunk;
+use super::path::{LanePlan, PathConfig, PathStats};
 use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
 use crate::core::Rng;
 use crate::film::Film;
@@ -161,11 +161,8 @@ impl Technique for Bdpt {
     }
 
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
-        let rho = ctx.scene.mean_reflectance();
-        let l_m = self.config.max_path_length.unwrap_or_else(|| max_path_length(rho, self.config.admitted_truncation));
-        let settings =
-            LaneSettings { lanes: self.config.packet_width as usize, regeneration: self.config.regeneration };
-        let queue = queue_pixels(self.config.packet_width, self.config.regeneration_steps, rho);
+        let LanePlan { max_path_length: l_m, mean_reflectance: rho, settings, queue } =
+            self.config.eye_settings().lane_plan(ctx.scene);
         let mut total = BdptStats::default();
         for _ in 0..self.config.spp {
             let pass = self.passes;

@@ -202,11 +202,28 @@ impl PathTracer {
     pub fn config(&self) -> &PathConfig {
         &self.config
     }
+}
 
-    /// l_m and ρ_S for a scene under this configuration.
-    pub fn path_length_for(&self, scene: &Scene) -> (u32, f32) {
+/// What a pass of eye-path lanes needs (shared by `path` and `bdpt`).
+pub(crate) struct LanePlan {
+    /// l_m and ρ_S.
+    pub max_path_length: u32,
+    pub mean_reflectance: f32,
+    pub settings: LaneSettings,
+    /// Pixels per packet queue.
+    pub queue: u32,
+}
+
+impl PathConfig {
+    /// The lane plan for `scene` under this configuration.
+    pub(crate) fn lane_plan(&self, scene: &Scene) -> LanePlan {
         let rho = scene.mean_reflectance();
-        (self.config.max_path_length.unwrap_or_else(|| max_path_length(rho, self.config.admitted_truncation)), rho)
+        LanePlan {
+            max_path_length: self.max_path_length.unwrap_or_else(|| max_path_length(rho, self.admitted_truncation)),
+            mean_reflectance: rho,
+            settings: LaneSettings { lanes: self.packet_width as usize, regeneration: self.regeneration },
+            queue: queue_pixels(self.packet_width, self.regeneration_steps, rho),
+        }
     }
 }
 
@@ -223,10 +240,8 @@ impl Technique for PathTracer {
     }
 
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
-        let (l_m, rho) = self.path_length_for(ctx.scene);
-        let settings =
-            LaneSettings { lanes: self.config.packet_width as usize, regeneration: self.config.regeneration };
-        let queue = queue_pixels(self.config.packet_width, self.config.regeneration_steps, rho);
+        let LanePlan { max_path_length: l_m, mean_reflectance: rho, settings, queue } =
+            self.config.lane_plan(ctx.scene);
         let lane_context = PathContext { scene: ctx.scene, accel: ctx.accel, max_path_length: l_m };
         let mut total = PathStats::default();
         for _ in 0..self.config.spp {
