@@ -14,21 +14,13 @@ fn bdpt(spp: u32) -> BdptConfig {
 fn furnace_matches_the_analytic_radiance_within_one_percent() {
     // Property: the weighted strategies sum to an unbiased estimate; c = 1e-4 makes the l_m
     // truncation negligible. The bound includes 3.3 standard errors over independent seeds.
-    let expected = furnace_radiance(None);
     for permute in [true, false] {
-        let xs: Vec<f64> = (0..10)
-            .map(|seed| {
-                let mut scene = load("furnace.json");
-                scene.set_resolution(16, 16);
-                let c = BdptConfig { admitted_truncation: 1e-4, permute, ..bdpt(16) };
-                let img = render(scene, TechniqueConfig::Bdpt(c), 70 + seed, 1, 2).image;
-                assert_finite_non_negative(&img);
-                img.mean().g as f64
-            })
-            .collect();
-        let (mean, se) = mean_and_standard_error(&xs);
-        eprintln!("furnace, permute {permute}: {mean:.5} ± {se:.5} (expected {expected:.5})");
-        assert!((mean - expected).abs() + 3.3 * se < 0.01 * expected, "permute {permute}: {mean} vs {expected}");
+        let c = TechniqueConfig::Bdpt(BdptConfig { admitted_truncation: 1e-4, permute, ..bdpt(16) });
+        assert_within_one_percent(
+            &format!("furnace, permute {permute}"),
+            &furnace_batches(&c, 10, Some(16), 1),
+            furnace_radiance(None),
+        );
     }
 }
 

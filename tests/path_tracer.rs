@@ -3,29 +3,12 @@ mod common;
 use common::*;
 use relume::technique::TechniqueConfig;
 
-/// Independent batch estimates of the furnace's mean radiance (green channel; all are equal).
-fn furnace_batches(config: relume::technique::path::PathConfig, batches: u64, ticks: u32) -> Vec<f64> {
-    (0..batches)
-        .map(|seed| {
-            let frame = render(load("furnace.json"), TechniqueConfig::Path(config.clone()), 1000 + seed, ticks, 2);
-            assert_finite_non_negative(&frame.image);
-            frame.image.mean().g as f64
-        })
-        .collect()
-}
-
 #[test]
 fn furnace_matches_the_analytic_radiance_within_one_percent() {
     // Property: the estimator is unbiased up to the l_m truncation, which c = 1e-4 makes
     // negligible (ρ^l_m ≈ 6e-5). The bound includes 3.3 standard errors (99.9% two-sided).
-    let config = relume::technique::path::PathConfig { admitted_truncation: 1e-4, ..path(2) };
-    let xs = furnace_batches(config, 12, 1);
-    let (mean, se) = mean_and_standard_error(&xs);
-    let expected = furnace_radiance(None);
-    let rel = (mean - expected).abs() / expected;
-    let bound = (mean - expected).abs() + 3.3 * se;
-    eprintln!("furnace: mean {mean:.6} expected {expected:.6} rel.err {rel:.5} se {se:.2e}");
-    assert!(bound < 0.01 * expected, "furnace off: mean {mean} vs {expected} (se {se})");
+    let config = TechniqueConfig::Path(relume::technique::path::PathConfig { admitted_truncation: 1e-4, ..path(2) });
+    assert_within_one_percent("furnace", &furnace_batches(&config, 12, None, 1), furnace_radiance(None));
 }
 
 #[test]
@@ -33,11 +16,12 @@ fn furnace_truncated_paths_match_the_truncated_series() {
     // Property: bounce k adds exactly ρ^k of the light: energy is conserved bounce by bounce, and
     // `max_path_length` cuts exactly where it says.
     for k in [1u32, 2, 4] {
-        let config = relume::technique::path::PathConfig { max_path_length: Some(k), ..path(2) };
-        let (mean, se) = mean_and_standard_error(&furnace_batches(config, 6, 1));
-        let expected = furnace_radiance(Some(k));
-        eprintln!("furnace k={k}: {mean:.6} vs {expected:.6} (se {se:.2e})");
-        assert!((mean - expected).abs() + 3.3 * se < 0.01 * expected, "k={k}: {mean} vs {expected}");
+        let config = TechniqueConfig::Path(relume::technique::path::PathConfig { max_path_length: Some(k), ..path(2) });
+        assert_within_one_percent(
+            &format!("furnace k={k}"),
+            &furnace_batches(&config, 6, None, 1),
+            furnace_radiance(Some(k)),
+        );
     }
 }
 

@@ -17,19 +17,13 @@ fn furnace_matches_the_analytic_radiance_within_one_percent() {
     // Property: NEE plus the photon density estimate reproduce L = ρI/(πR²(1−ρ)) = 1/π. In a
     // sphere the irradiance is uniform, so the kernel adds no bias; B = 15 makes the truncation
     // (ρ^15 ≈ 3e-5) negligible. The bound includes 3.3 standard errors over independent seeds.
-    let expected = 1.0 / std::f64::consts::PI;
-    for reuse in [ReuseMode::Off, ReuseMode::Naive] {
-        let xs: Vec<f64> = (0..8)
-            .map(|seed| {
-                let mut scene = load("furnace.json");
-                scene.set_resolution(24, 24);
-                let c = PhotonReuseConfig { max_photons: 15, ..config(300_000, reuse) };
-                render(scene, TechniqueConfig::PhotonReuse(c), 50 + seed, 2, 2).image.mean().g as f64
-            })
-            .collect();
-        let (mean, se) = mean_and_standard_error(&xs);
-        eprintln!("furnace {reuse:?}: {mean:.5} ± {se:.5} (expected {expected:.5})");
-        assert!((mean - expected).abs() + 3.3 * se < 0.01 * expected, "{reuse:?}: {mean} vs {expected}");
+    for reuse in [ReuseMode::Off, ReuseMode::Naive, ReuseMode::Error] {
+        let c = TechniqueConfig::PhotonReuse(PhotonReuseConfig { max_photons: 15, ..config(300_000, reuse) });
+        assert_within_one_percent(
+            &format!("furnace {reuse:?}"),
+            &furnace_batches(&c, 8, Some(24), 2),
+            furnace_radiance(None),
+        );
     }
 }
 

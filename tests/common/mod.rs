@@ -62,6 +62,30 @@ pub fn furnace_radiance(max_vertices: Option<u32>) -> f64 {
     }
 }
 
+/// Independent batch estimates of the furnace's mean radiance (green channel; all are equal),
+/// one per seed, at `side`² pixels (the scene's own resolution if `None`).
+pub fn furnace_batches(config: &TechniqueConfig, batches: u64, side: Option<u32>, ticks: u32) -> Vec<f64> {
+    (0..batches)
+        .map(|seed| {
+            let mut scene = load("furnace.json");
+            if let Some(side) = side {
+                scene.set_resolution(side, side);
+            }
+            let frame = render(scene, config.clone(), 1000 + seed, ticks, 2);
+            assert_finite_non_negative(&frame.image);
+            frame.image.mean().g as f64
+        })
+        .collect()
+}
+
+/// Asserts batch estimates match `expected` within 1%, including 3.3 standard errors (99.9%
+/// two-sided) of their mean.
+pub fn assert_within_one_percent(label: &str, batches: &[f64], expected: f64) {
+    let (mean, se) = mean_and_standard_error(batches);
+    eprintln!("{label}: {mean:.6} ± {se:.2e} (expected {expected:.6})");
+    assert!((mean - expected).abs() + 3.3 * se < 0.01 * expected, "{label}: {mean} (se {se}) vs {expected}");
+}
+
 pub fn path(spp: u32) -> PathConfig {
     PathConfig { spp, ..PathConfig::default() }
 }

@@ -163,47 +163,38 @@ impl Technique for Bdpt {
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
         let LanePlan { max_path_length: l_m, mean_reflectance: rho, settings, queue } =
             self.config.eye_settings().lane_plan(ctx.scene);
-        let mut total = BdptStats::default();
-        for _ in 0..self.config.spp {
-            let pass = self.passes;
-            let stats = film.accumulate_chunks(
-                queue as usize,
-                |first, chunk| {
-                    // This queue's batch of light subpaths, each from its own stream.
-                    let mut light_rays = 0;
-                    let batch: Vec<_> = (0..self.config.light_batch as u64)
-                        .map(|k| {
-                            let stream = (first as u64) << 16 | k;
-                            let mut rng = Rng::for_sample(ctx.seed, ctx.tick, stream, pass ^ LIGHT_STREAM);
-                            let (path, rays) = vertex::light_subpath(ctx.scene, ctx.accel, l_m as usize, &mut rng);
-                            light_rays += rays;
-                            path
-                        })
-                        .collect();
-                    let lane_ctx = BdptContext {
-                        scene: ctx.scene,
-                        accel: ctx.accel,
-                        max_path_length: l_m,
-                        batch: &batch,
-                        permute: self.config.permute,
-                    };
-                    let lanes = trace_chunk::<BdptLane>(
-                        ctx.scene,
-                        ctx.accel.scene(),
-                        &lane_ctx,
-                        &settings,
-                        (ctx.seed, ctx.tick, pass),
-                        first,
-                        chunk,
-                    );
-                    BdptStats { lanes, light_subpaths: batch.len() as u64, light_subpath_rays: light_rays }
-                },
-                BdptStats::merge,
-            );
-            total = total.merge(stats);
-            self.passes += 1;
-            film.passes += 1;
-        }
+        let (batch_size, permute) = (self.config.light_batch as u64, self.config.permute);
+        let mut total = film.accumulate_passes(
+            self.config.spp,
+            &mut self.passes,
+            queue as usize,
+            |pass, first, chunk| {
+                // This queue's batch of light subpaths, each from its own stream.
+                let mut light_rays = 0;
+                let batch: Vec<_> = (0..batch_size)
+                    .map(|k| {
+                        let stream = (first as u64) << 16 | k;
+                        let mut rng = Rng::for_sample(ctx.seed, ctx.tick, stream, pass ^ LIGHT_STREAM);
+                        let (path, rays) = vertex::light_subpath(ctx.scene, ctx.accel, l_m as usize, &mut rng);
+                        light_rays += rays;
+                        path
+                    })
+                    .collect();
+                let lane_ctx =
+                    BdptContext { scene: ctx.scene, accel: ctx.accel, max_path_length: l_m, batch: &batch, permute };
+                let lanes = trace_chunk::<BdptLane>(
+                    ctx.scene,
+                    ctx.accel.scene(),
+                    &lane_ctx,
+                    &settings,
+                    (ctx.seed, ctx.tick, pass),
+                    first,
+                    chunk,
+                );
+                BdptStats { lanes, light_subpaths: batch.len() as u64, light_subpath_rays: light_rays }
+            },
+            BdptStats::merge,
+        );
         total.lanes.max_path_length = l_m;
         total.lanes.queue_pixels = queue;
         total.lanes.mean_reflectance = rho;

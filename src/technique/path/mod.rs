@@ -243,28 +243,23 @@ impl Technique for PathTracer {
         let LanePlan { max_path_length: l_m, mean_reflectance: rho, settings, queue } =
             self.config.lane_plan(ctx.scene);
         let lane_context = PathContext { scene: ctx.scene, accel: ctx.accel, max_path_length: l_m };
-        let mut total = PathStats::default();
-        for _ in 0..self.config.spp {
-            let sample = self.passes;
-            let stats = film.accumulate_chunks(
-                queue as usize,
-                |first, chunk| {
-                    packets::trace_chunk::<PathLane>(
-                        ctx.scene,
-                        ctx.accel.scene(),
-                        &lane_context,
-                        &settings,
-                        (ctx.seed, ctx.tick, sample),
-                        first,
-                        chunk,
-                    )
-                },
-                PathStats::merge,
-            );
-            total = total.merge(stats);
-            self.passes += 1;
-            film.passes += 1;
-        }
+        let mut total = film.accumulate_passes(
+            self.config.spp,
+            &mut self.passes,
+            queue as usize,
+            |pass, first, chunk| {
+                packets::trace_chunk::<PathLane>(
+                    ctx.scene,
+                    ctx.accel.scene(),
+                    &lane_context,
+                    &settings,
+                    (ctx.seed, ctx.tick, pass),
+                    first,
+                    chunk,
+                )
+            },
+            PathStats::merge,
+        );
         total.max_path_length = l_m;
         total.queue_pixels = queue;
         total.mean_reflectance = rho;

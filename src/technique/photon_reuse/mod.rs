@@ -452,20 +452,16 @@ impl Technique for PhotonReuse {
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
         let t = Instant::now();
         let width = ctx.scene.camera.width as usize;
-        let mut rays = gather::RenderRays::default();
-        for _ in 0..self.config.spp {
-            let pass = self.passes;
-            let grid = &self.grid;
-            rays = rays.merge(film.accumulate_chunks(
-                width,
-                |first, chunk| {
-                    gather::render_chunk(ctx.scene, ctx.accel, grid, (ctx.seed, ctx.tick, pass), first, chunk)
-                },
-                gather::RenderRays::merge,
-            ));
-            self.passes += 1;
-            film.passes += 1;
-        }
+        let grid = &self.grid;
+        let rays = film.accumulate_passes(
+            self.config.spp,
+            &mut self.passes,
+            width,
+            |pass, first, chunk| {
+                gather::render_chunk(ctx.scene, ctx.accel, grid, (ctx.seed, ctx.tick, pass), first, chunk)
+            },
+            gather::RenderRays::merge,
+        );
         let mut stats = std::mem::take(&mut self.pending);
         stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
         stats.camera_rays = rays.camera;
