@@ -1,4 +1,5 @@
-//! `instant_cache` (modes `igi` and `static`) against analytic answers and the `path` reference.
+//! `instant_cache` (modes `igi`, `static` and `temporal`) against analytic answers and the `path`
+//! reference.
 mod common;
 use common::*;
 use relume::technique::instant_cache::{CacheMode, InstantCacheConfig};
@@ -22,7 +23,7 @@ fn furnace_is_within_one_percent_in_every_mode() {
     // truncation negligible and no clamp hides near VPLs. The VPLs are a scrambled Halton
     // set (fixed), so the figure is deterministic: a plain Halton set was 4.7% high here.
     let expected = furnace_radiance(None);
-    for mode in [CacheMode::Igi, CacheMode::Static] {
+    for mode in [CacheMode::Igi, CacheMode::Static, CacheMode::Temporal] {
         let mut scene = load("furnace.json");
         scene.set_resolution(24, 24);
         let c =
@@ -78,9 +79,11 @@ fn bad_configurations_are_rejected_naming_the_field() {
         (InstantCacheConfig { interleave: 0, ..InstantCacheConfig::default() }, "interleave"),
         (InstantCacheConfig { caching_radius: f32::NAN, ..InstantCacheConfig::default() }, "caching_radius"),
         (InstantCacheConfig { clamp_distance: -1.0, ..InstantCacheConfig::default() }, "clamp_distance"),
+        (InstantCacheConfig { max_age: 0, ..InstantCacheConfig::default() }, "max_age"),
     ] {
         match relume::technique::build(&TechniqueConfig::InstantCache(c), &scene) {
             Err(relume::technique::TechniqueError::InvalidConfig { field: f, .. }) => assert_eq!(f, field),
+            Err(other) => panic!("{field}: {other}"),
             Ok(_) => panic!("{field} accepted"),
         }
     }

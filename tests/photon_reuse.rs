@@ -122,6 +122,7 @@ fn bad_configurations_are_rejected_naming_the_field() {
     ] {
         match relume::technique::build(&TechniqueConfig::PhotonReuse(c), &scene) {
             Err(relume::technique::TechniqueError::InvalidConfig { field: f, .. }) => assert_eq!(f, field),
+            Err(other) => panic!("{field}: {other}"),
             Ok(_) => panic!("{field} accepted"),
         }
     }

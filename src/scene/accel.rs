@@ -22,7 +22,8 @@ enum InstanceContent {
 pub struct SceneAccel {
     top: Arc<CommittedScene>,
     instances: Vec<Option<InstanceContent>>,
-    instance_of: HashMap<SurfaceId, GeometryId>,
+    /// Each dynamic surface's instance in `top` and its bottom-level scene.
+    instance_of: HashMap<SurfaceId, (GeometryId, Arc<CommittedScene>)>,
 }
 
 impl SceneAccel {
@@ -70,9 +71,10 @@ impl SceneAccel {
         for (id, positions, triangles, xf) in dynamic {
             let mut blas = EmbreeScene::new(device, SceneQuality::Static)?;
             blas.attach_triangles(&positions, &triangles)?;
-            let inst = top.attach_instance(Arc::new(blas.commit()?), xf)?;
+            let blas = Arc::new(blas.commit()?);
+            let inst = top.attach_instance(blas.clone(), xf)?;
             set_slot(&mut instances, inst, InstanceContent::Dynamic(id));
-            instance_of.insert(id, inst);
+            instance_of.insert(id, (inst, blas));
         }
         Ok(SceneAccel { top: Arc::new(top.commit()?), instances, instance_of })
     }
@@ -104,16 +106,33 @@ impl SceneAccel {
             e
         })?;
         let edited = moved.iter().try_for_each(|id| {
-            let inst = *self.instance_of.get(id).ok_or(EmbreeError::UnknownGeometry(u32::MAX))?;
-            let xf = match *id {
-                SurfaceId::Object(i) => scene.objects[i as usize].world_from_object,
-                SurfaceId::Light(i) => scene.desc().lights[i as usize].transform.world_from_object(),
-            };
-            top.set_instance_transform(inst, xf)
+            let (inst, _) = self.instance_of.get(id).ok_or(EmbreeError::UnknownGeometry(u32::MAX))?;
+            top.set_instance_transform(*inst, current_transform(scene, *id))
         });
         // Recommit even after a failed edit, so the accel stays traceable.
         self.top = Arc::new(top.commit()?);
         edited
+    }
+
+    /// A separate scene holding only the dynamic `surfaces`, at their current transforms: the
+    /// same bottom-level scenes under the same transforms as in [`SceneAccel::scene`], so a ray
+    /// meets them exactly as it would there. Queries against it cost a few instances, not the
+    /// scene. Fails if a surface is not dynamic.
+    pub fn subset(&self, scene: &Scene, surfaces: &[SurfaceId]) -> Result<CommittedScene, EmbreeError> {
+        let mut subset = EmbreeScene::new(self.top.device(), SceneQuality::Dynamic)?;
+        for id in surfaces {
+            let (_, blas) = self.instance_of.get(id).ok_or(EmbreeError::UnknownGeometry(u32::MAX))?;
+            subset.attach_instance(blas.clone(), current_transform(scene, *id))?;
+        }
+        subset.commit()
+    }
+}
+
+/// Where a dynamic surface is now.
+fn current_transform(scene: &Scene, id: SurfaceId) -> Affine3A {
+    match id {
+        SurfaceId::Object(i) => scene.objects[i as usize].world_from_object,
+        SurfaceId::Light(i) => scene.desc().lights[i as usize].transform.world_from_object(),
     }
 }
 

@@ -6,7 +6,7 @@ use super::worker::SessionHandle;
 use crate::embree::Device;
 use crate::engine::Session;
 use crate::scene::Scene;
-use crate::technique::{path::PathConfig, TechniqueConfig};
+use crate::technique::{path::PathConfig, TechniqueConfig, TechniqueError};
 use axum::http::StatusCode;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -222,7 +222,9 @@ impl AppState {
         }
 
         let session = Session::new(scene, &technique, req.seed, &self.device).map_err(|e| match e {
-            crate::engine::EngineError::Technique(t) => ApiError::invalid(format!("technique: {t}")),
+            crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
+                ApiError::invalid(format!("technique: {t}"))
+            }
             crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("scene: {s}")),
             other => ApiError::internal(other.to_string()),
         })?;

@@ -6,7 +6,7 @@ use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::Ray;
 use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
 use crate::technique::nee::sample_next_event;
-use glam::Vec3;
+use glam::{Vec2, Vec3};
 
 /// Longest specular chain a camera ray follows before it gives up.
 pub const MAX_SPECULAR_CHAIN: u32 = 16;
@@ -49,10 +49,11 @@ pub struct CameraSample {
     pub specular_rays: u64,
 }
 
-/// Traces a jittered camera ray through pixel `index` (row-major) and its specular chain.
-pub fn trace(scene: &Scene, accel: &SceneAccel, index: usize, rng: &mut Rng) -> CameraSample {
+/// Traces the camera ray through point `jitter` ∈ [0, 1)² of pixel `index` (row-major) and
+/// its specular chain, which draws from `rng`.
+pub fn trace(scene: &Scene, accel: &SceneAccel, index: usize, jitter: Vec2, rng: &mut Rng) -> CameraSample {
     let width = scene.camera.width as usize;
-    let j = rng.next_2d();
+    let j = jitter;
     let mut ray = scene.camera.ray((index % width) as f32 + j.x, (index / width) as f32 + j.y);
     let mut out = CameraSample::default();
     let mut beta = Rgb::WHITE;

@@ -6,6 +6,7 @@
 //! (verify, invalidate, retrace), then `render` adds samples to the film. Per-tick calls go
 //! through `Box<dyn Technique>`; per-ray variety inside a technique is a closed `enum`.
 pub mod bdpt;
+pub mod box_tree;
 pub mod camera_chain;
 pub mod instant_cache;
 pub mod nee;
@@ -32,6 +33,8 @@ pub struct RenderContext<'a> {
 pub enum TechniqueError {
     #[error("invalid technique configuration: {field}: {message}")]
     InvalidConfig { field: String, message: String },
+    #[error("embree: {0}")]
+    Embree(#[from] crate::embree::EmbreeError),
 }
 
 /// Rays traced, by kind.

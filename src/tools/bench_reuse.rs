@@ -7,15 +7,10 @@
 //! filled segments); camera and shadow rays are the same in every mode and left out.
 //! `verify` time is origin updates with DM_C, dynamic occlusions and pruning; `trace` is fills
 //! and retraces.
-use super::render::load_scene;
-use super::{SceneArgs, UsageError};
-use crate::embree::Device;
-use crate::engine::{thread_pool, Session};
-use crate::scene::animation::Animation;
+use super::{progress_bar, quantile, AnimationRun, SceneArgs, UsageError};
 use crate::technique::photon_reuse::{PhotonReuseConfig, ReuseMode};
 use crate::technique::{TechniqueConfig, TechniqueStats};
-use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
+use anyhow::Result;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -85,30 +80,13 @@ fn verify_ms(f: &FrameFigures) -> f64 {
     f.stages_ms["origins_and_dm"] + f.stages_ms["verify"] + f.stages_ms["prune"]
 }
 
-fn quantile(values: &[f64], q: f64) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        return 0.0;
-    }
-    v[((v.len() - 1) as f64 * q).round() as usize]
-}
-
 pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
     if args.frames < 2 || !(args.fps > 0.0 && args.fps.is_finite()) {
         return Err(UsageError("--frames must be at least 2 and --fps positive".into()).into());
     }
-    let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
-    let anim = Animation::load(&args.anim).map_err(|e| UsageError(format!("{}: {e}", args.anim.display())))?;
-    anim.validate(&scene).map_err(|e| UsageError(format!("{}: {e}", args.anim.display())))?;
-    let threads = args.target.threads();
-    let pool = thread_pool(threads)?;
-    let device = Device::new(threads).context("creating the Embree device")?;
+    let run = AnimationRun::load(&args.target, &args.anim)?;
     let modes = [ReuseMode::Off, ReuseMode::Naive, ReuseMode::Error];
-    let bar = ProgressBar::new(modes.len() as u64 * args.frames as u64);
-    bar.set_style(
-        ProgressStyle::with_template("{msg:12} [{bar:30}] {pos}/{len} frames ({eta} left)")?.progress_chars("=> "),
-    );
+    let bar = progress_bar(modes.len() as u64 * args.frames as u64, "frames")?;
     let mut reports = Vec::new();
     for mode in modes {
         let name = serde_json::to_value(mode)?.as_str().unwrap_or("?").to_string();
@@ -118,36 +96,31 @@ pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
             reuse: mode,
             ..PhotonReuseConfig::default()
         });
-        let mut session = Session::new(scene.clone(), &config, args.seed, &device)?;
         let mut figures = Vec::new();
         let mut memory = 0;
-        pool.install(|| -> Result<()> {
-            for i in 0..args.frames {
-                session.queue_edits(anim.edits_at(i as f32 / args.fps))?;
-                let frame = session.tick()?;
-                let TechniqueStats::PhotonReuse(s) = &frame.stats.detail else {
-                    anyhow::bail!("photon_reuse stats expected");
-                };
-                memory = s.memory.total() + s.grid_bytes;
-                let t = &frame.stats.times;
-                let stages = BTreeMap::from([
-                    ("apply_and_commit", t.apply_ms + t.commit_ms),
-                    ("origins_and_dm", s.origins_ms),
-                    ("verify", s.verify_ms),
-                    ("prune", s.prune_ms),
-                    ("fill", s.fill_ms),
-                    ("trace", s.trace_ms),
-                    ("grid", s.grid_ms),
-                    ("render", s.render_ms),
-                ]);
-                figures.push(FrameFigures {
-                    rays_traced: s.photon_rays(),
-                    paths_retraced: s.partly_retraced + s.fully_retraced,
-                    tick_ms: t.total_ms,
-                    stages_ms: stages,
-                });
-                bar.inc(1);
-            }
+        run.play(&config, args.seed, args.frames, args.fps, |_, frame| {
+            let TechniqueStats::PhotonReuse(s) = &frame.stats.detail else {
+                anyhow::bail!("photon_reuse stats expected");
+            };
+            memory = s.memory.total() + s.grid_bytes;
+            let t = &frame.stats.times;
+            let stages = BTreeMap::from([
+                ("apply_and_commit", t.apply_ms + t.commit_ms),
+                ("origins_and_dm", s.origins_ms),
+                ("verify", s.verify_ms),
+                ("prune", s.prune_ms),
+                ("fill", s.fill_ms),
+                ("trace", s.trace_ms),
+                ("grid", s.grid_ms),
+                ("render", s.render_ms),
+            ]);
+            figures.push(FrameFigures {
+                rays_traced: s.photon_rays(),
+                paths_retraced: s.partly_retraced + s.fully_retraced,
+                tick_ms: t.total_ms,
+                stages_ms: stages,
+            });
+            bar.inc(1);
             Ok(())
         })?;
         let initial = figures.remove(0);
@@ -173,9 +146,9 @@ pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
         scene: args.target.scene.display().to_string(),
         animation: args.anim.display().to_string(),
         paths: args.paths,
-        width: scene.camera.width,
-        height: scene.camera.height,
-        threads,
+        width: run.scene.camera.width,
+        height: run.scene.camera.height,
+        threads: run.threads,
         modes: reports,
     })
 }

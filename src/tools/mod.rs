@@ -2,6 +2,7 @@
 //! binaries do; the library modules below them return typed errors.
 pub mod bench;
 pub mod bench_error;
+pub mod bench_icache;
 pub mod bench_reuse;
 pub mod load;
 pub mod render;
@@ -57,4 +58,71 @@ pub fn scenes_root_for(scene: &Path) -> PathBuf {
     let dir = scene.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
     let dir = if dir.as_os_str().is_empty() { PathBuf::from(".") } else { dir };
     dir.ancestors().find(|a| a.file_name().is_some_and(|n| n == "scenes")).map(Path::to_path_buf).unwrap_or(dir)
+}
+
+/// The q-quantile of `values` (nearest rank; 0 for none).
+pub fn quantile(values: &[f64], q: f64) -> f64 {
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    if v.is_empty() {
+        return 0.0;
+    }
+    v[((v.len() - 1) as f64 * q).round() as usize]
+}
+
+/// A progress bar on stderr counting `unit`s, with a message and the time left.
+pub fn progress_bar(len: u64, unit: &str) -> anyhow::Result<indicatif::ProgressBar> {
+    let bar = indicatif::ProgressBar::new(len);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(&format!(
+            "{{msg:28}} [{{bar:30}}] {{pos}}/{{len}} {unit} ({{eta}} left)"
+        ))?
+        .progress_chars("=> "),
+    );
+    Ok(bar)
+}
+
+/// What an animation benchmark plays: the scene, its animation, a thread pool and a device.
+pub struct AnimationRun {
+    pub scene: crate::scene::Scene,
+    pub anim: crate::scene::animation::Animation,
+    pub threads: usize,
+    pool: rayon::ThreadPool,
+    device: crate::embree::Device,
+}
+
+impl AnimationRun {
+    /// Loads and validates the scene and animation (mistakes are usage errors).
+    pub fn load(target: &SceneArgs, anim: &Path) -> anyhow::Result<AnimationRun> {
+        use anyhow::Context;
+        let scene = render::load_scene(&target.scene, target.width, target.height)?;
+        let animation = crate::scene::animation::Animation::load(anim)
+            .map_err(|e| UsageError(format!("{}: {e}", anim.display())))?;
+        animation.validate(&scene).map_err(|e| UsageError(format!("{}: {e}", anim.display())))?;
+        let threads = target.threads();
+        let pool = crate::engine::thread_pool(threads)?;
+        let device = crate::embree::Device::new(threads).context("creating the Embree device")?;
+        Ok(AnimationRun { scene, anim: animation, threads, pool, device })
+    }
+
+    /// Plays `frames` frames at `fps` in a fresh session of `config`, handing each frame to
+    /// `each` with its index.
+    pub fn play(
+        &self,
+        config: &crate::technique::TechniqueConfig,
+        seed: u64,
+        frames: u32,
+        fps: f32,
+        mut each: impl FnMut(u32, &crate::engine::Frame) -> anyhow::Result<()> + Send,
+    ) -> anyhow::Result<()> {
+        let mut session = crate::engine::Session::new(self.scene.clone(), config, seed, &self.device)?;
+        self.pool.install(|| {
+            for i in 0..frames {
+                session.queue_edits(self.anim.edits_at(i as f32 / fps))?;
+                let frame = session.tick()?;
+                each(i, &frame)?;
+            }
+            Ok(())
+        })
+    }
 }

@@ -14,34 +14,62 @@ use crate::core::Rgb;
 use crate::scene::SceneAccel;
 use glam::Vec3;
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Record {
     pub position: Vec3,
     pub normal: Vec3,
+    /// The object the record lies on.
+    pub object: u32,
+    /// The sum of `contributions`, unpacked, in VPL order.
     pub irradiance: Rgb,
     /// Per VPL, its irradiance contribution (zero when occluded), RGBE.
     pub contributions: Vec<u32>,
+    /// The last tick that interpolated from this record (`temporal` ages records by it).
+    pub last_used: u64,
+    /// Flagged by `temporal`'s on-demand re-evaluation: this tick's changes are not applied yet.
+    pub stale: bool,
+}
+
+impl Record {
+    /// A record at `p` with the given contributions; its irradiance is their sum.
+    pub fn new(p: Vec3, n: Vec3, object: u32, contributions: Vec<u32>, tick: u64) -> Record {
+        let irradiance = contributions.iter().fold(Rgb::BLACK, |sum, &c| sum + rgbe::unpack(c));
+        Record { position: p, normal: n, object, irradiance, contributions, last_used: tick, stale: false }
+    }
+}
+
+/// One VPL's contribution to the record at `p` (unit normal `n`), RGBE, and the visibility rays
+/// traced for it (0 or 1).
+pub fn contribution(accel: &SceneAccel, vpl: &Vpl, p: Vec3, n: Vec3, min_distance: f32) -> (u32, u64) {
+    let Some((e, _, _)) = irradiance_from(vpl, p, n, min_distance) else { return (0, 0) };
+    if accel.scene().occluded1(&visibility_ray(p, n, vpl)) {
+        (0, 1)
+    } else {
+        (rgbe::pack(e), 1)
+    }
 }
 
 /// Computes a record at `p` (unit normal `n` facing the viewer) from every VPL, with one
 /// visibility ray each. Returns the record and the rays traced.
-pub fn compute_record(accel: &SceneAccel, vpls: &[Vpl], p: Vec3, n: Vec3, min_distance: f32) -> (Record, u64) {
-    let mut irradiance = Rgb::BLACK;
+pub fn compute_record(
+    accel: &SceneAccel,
+    vpls: &[Vpl],
+    p: Vec3,
+    n: Vec3,
+    object: u32,
+    min_distance: f32,
+    tick: u64,
+) -> (Record, u64) {
     let mut rays = 0;
     let contributions = vpls
         .iter()
         .map(|vpl| {
-            let Some((e, _, _)) = irradiance_from(vpl, p, n, min_distance) else { return 0 };
-            rays += 1;
-            if accel.scene().occluded1(&visibility_ray(p, n, vpl)) {
-                return 0;
-            }
-            let packed = rgbe::pack(e);
-            irradiance += rgbe::unpack(packed);
-            packed
+            let (c, traced) = contribution(accel, vpl, p, n, min_distance);
+            rays += traced;
+            c
         })
         .collect();
-    (Record { position: p, normal: n, irradiance, contributions }, rays)
+    (Record::new(p, n, object, contributions, tick), rays)
 }
 
 /// Records and the octree over them.
@@ -67,6 +95,19 @@ impl Cache {
         self.octree.clear();
     }
 
+    /// Keeps the records for which `keep` holds (indices change) and returns how many went.
+    pub fn retain(&mut self, keep: impl FnMut(&Record) -> bool) -> u64 {
+        let before = self.records.len();
+        self.records.retain(keep);
+        if self.records.len() < before {
+            self.octree.clear();
+            for (i, r) in self.records.iter().enumerate() {
+                self.octree.insert(i as u32, r.position);
+            }
+        }
+        (before - self.records.len()) as u64
+    }
+
     pub fn insert(&mut self, record: Record) -> u32 {
         let index = self.records.len() as u32;
         self.octree.insert(index, record.position);
@@ -75,27 +116,21 @@ impl Cache {
     }
 
     /// Eq. 5's weight of `record` at `p` with unit normal `n`.
-    fn weight(&self, record: &Record, p: Vec3, n: Vec3) -> f32 {
-        let d = (p - record.position).length() / self.scale;
-        1.0 / (d + (1.0 - n.dot(record.normal)).max(0.0).sqrt()).max(1e-12)
-    }
-
-    /// Calls `f(index, weight)` for every record with w > 1/a at `p`.
-    fn near(&self, p: Vec3, n: Vec3, mut f: impl FnMut(u32, f32)) {
-        let threshold = 1.0 / self.radius;
-        self.octree.query(p, self.radius * self.scale, |i| {
-            let w = self.weight(&self.records[i as usize], p, n);
-            if w > threshold {
-                f(i, w);
+    /// Calls `f(index, w)` for every record with eq. 5's weight w > 1/a at `p` (unit normal
+    /// `n`). A record farther than a cannot qualify, so the square root waits for the distance test.
+    pub fn near(&self, p: Vec3, n: Vec3, mut f: impl FnMut(u32, f32)) {
+        let reach = self.radius * self.scale;
+        self.octree.query(p, reach, |i| {
+            let record = &self.records[i as usize];
+            let d2 = (p - record.position).length_squared();
+            if d2 >= reach * reach {
+                return;
+            }
+            let inverse = d2.sqrt() / self.scale + (1.0 - n.dot(record.normal)).max(0.0).sqrt();
+            if inverse < self.radius {
+                f(i, 1.0 / inverse.max(1e-12));
             }
         });
-    }
-
-    /// Is `p` covered by a record (some w > 1/a)?
-    pub fn covers(&self, p: Vec3, n: Vec3) -> bool {
-        let mut any = false;
-        self.near(p, n, |_, _| any = true);
-        any
     }
 
     /// Eq. 4's interpolated irradiance at `p`, or `None` where no record covers it.
@@ -113,4 +148,45 @@ impl Cache {
             self.records.iter().map(|r| (std::mem::size_of::<Record>() + r.contributions.len() * 4) as u64).sum();
         records + self.octree.memory_bytes()
     }
+}
+
+/// What [`audit`] found.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Audit {
+    pub records: u64,
+    /// Records whose contributions or irradiance differ from a fresh computation.
+    pub mismatched: u64,
+    /// Records with no surface within `reach` below them.
+    pub off_surface: u64,
+    /// A hash of the checked records' positions, normals and contributions, in position order.
+    pub digest: u64,
+}
+
+/// Recomputes every record that is not stale from scratch with `vpls` and compares bit for
+/// bit; also checks that a surface still lies under each record (a probe ray from `reach`
+/// above it along its normal, back down `2·reach`).
+pub fn audit(accel: &SceneAccel, cache: &Cache, vpls: &[Vpl], min_distance: f32, reach: f32) -> Audit {
+    use rayon::prelude::*;
+    use std::hash::{Hash, Hasher};
+    let checked: Vec<&Record> = cache.records.iter().filter(|r| !r.stale).collect();
+    let (mismatched, off_surface) = checked
+        .par_iter()
+        .map(|r| {
+            let (fresh, _) = compute_record(accel, vpls, r.position, r.normal, r.object, min_distance, r.last_used);
+            let mismatched = fresh.contributions != r.contributions || fresh.irradiance != r.irradiance;
+            let probe = crate::embree::Ray::segment(r.position + r.normal * reach, -r.normal, 2.0 * reach);
+            (u64::from(mismatched), u64::from(!accel.scene().occluded1(&probe)))
+        })
+        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    let mut keys: Vec<([u32; 6], &[u32])> = checked
+        .iter()
+        .map(|r| {
+            let (p, n) = (r.position.to_array().map(f32::to_bits), r.normal.to_array().map(f32::to_bits));
+            ([p[0], p[1], p[2], n[0], n[1], n[2]], r.contributions.as_slice())
+        })
+        .collect();
+    keys.sort_unstable();
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    keys.hash(&mut hasher);
+    Audit { records: checked.len() as u64, mismatched, off_surface, digest: hasher.finish() }
 }

@@ -17,34 +17,53 @@
 //!      computed in parallel, each with one visibility ray per VPL and G′ (eqs. 2–3), and every
 //!      pixel interpolates them (eq. 4). Deciding where records go in pixel order keeps the
 //!      image independent of the thread count.
+//!    - `temporal` (`temporal.rs`, §3.2, Algorithm 1): the same cache kept across ticks. At
+//!      the start of a tick, records unused for `max_age` ticks go; if VPLs changed or
+//!      surfaces moved, records on a moved object go (case 5) and the rest
+//!      are re-evaluated, ray by ray, for cases 1–4, either at once (`immediate`) or when a
+//!      pixel first interpolates them (`on_demand`). New areas get records on demand as in
+//!      `static`. The result is exact: every record equals a fresh computation. Camera
+//!      samples use the same sub-pixel points every tick (the k-th of a tick's `spp`), so a
+//!      still view makes no records after its first tick; direct light still varies.
 //! 4. Radiance = emission seen along the chain + direct + ρ/π · indirect irradiance.
 //!
 //! # Parameters (defaults)
 //! | field | default | meaning |
 //! |---|---|---|
-//! | `mode` | `static` | `igi` or `static` (`temporal`, the cache kept across ticks, is not built yet) |
+//! | `mode` | `temporal` | `igi`, `static` or `temporal` |
 //! | `vpls` | 256 | VPLs per tick, on average (⌈vpls·(1 − ρ_S)⌉ paths are shot; at most 4× are kept) |
 //! | `interleave` | 4 | n of `igi`'s n×n interleaved sampling |
 //! | `caching_radius` | 0.05 | a, in units of the scene's bounding diagonal |
 //! | `clamp_distance` | 0.01 | min_d of G′'s clamp, in units of the scene's bounding diagonal |
 //! | `admitted_truncation` | 0.01 | c of the VPL paths' length l_m (as `path`) |
 //! | `spp` | 1 | camera samples per pixel per tick |
+//! | `reevaluation` | `immediate` | `temporal`: re-evaluate invalidated records at the start of the tick, or `on_demand` when first interpolated |
+//! | `max_age` | 16 | `temporal`: records unused this many ticks are dropped |
+//! | `audit` | false | recompute every record after each pass and count those that differ |
 //!
 //! # Bias and consistency
 //! Biased, like every VPL method: G′'s clamp drops light from VPLs closer than 0.8·min_d (dark
 //! corners), interpolation blurs irradiance across a record's radius, RGBE rounds each VPL's
 //! contribution to about 1%, and 256 VPLs give low-frequency error (splotches) rather than
 //! noise. It converges as VPLs → ∞, a → 0 and min_d → 0. Only diffuse reflection is cached.
+//! `temporal` adds no bias of its own (its records are exact), but its records sit where
+//! earlier ticks' pixels put them, so its image differs from `static`'s by where the
+//! interpolation error falls, not by how large it is.
 //!
 //! # Failure modes
 //! Small bright VPLs near a surface still show as spots above the clamp distance; glossy
 //! transport is not handled; a caching radius too large for fine geometry blurs contact
-//! shadows of indirect light.
+//! shadows of indirect light. `temporal` degrades to `static`'s cost when many surfaces move
+//! (every VPL changes) and a moving light invalidates every VPL it shot.
 mod cache;
+mod config;
 mod igi;
 mod octree;
 mod rgbe;
+mod temporal;
 mod vpl;
+
+pub use config::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation, MAX_VPLS};
 
 use super::camera_chain::{self, CameraSample, DiffuseHit};
 use super::path::max_path_length;
@@ -53,106 +72,32 @@ use crate::core::{Rgb, Rng};
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
 use crate::scene::Scene;
-use cache::Cache;
+use cache::{Cache, Record};
+use glam::Vec3;
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
 use std::f32::consts::FRAC_1_PI;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
+use temporal::{Refresh, TickChanges};
 use vpl::Vpl;
 
-/// How indirect light is gathered.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum CacheMode {
-    /// Instant global illumination: interleaved VPL subsets and a discontinuity buffer.
-    Igi,
-    /// The instant cache, rebuilt every tick.
-    Static,
-}
-
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct InstantCacheConfig {
-    pub mode: CacheMode,
-    pub vpls: u32,
-    pub interleave: u32,
-    pub caching_radius: f32,
-    pub clamp_distance: f32,
-    pub admitted_truncation: f32,
-    pub spp: u32,
-}
-
-impl Default for InstantCacheConfig {
-    fn default() -> InstantCacheConfig {
-        InstantCacheConfig {
-            mode: CacheMode::Static,
-            vpls: 256,
-            interleave: 4,
-            caching_radius: 0.05,
-            clamp_distance: 0.01,
-            admitted_truncation: 0.01,
-            spp: 1,
-        }
-    }
-}
-
-/// Most VPLs a tick may shoot.
-pub const MAX_VPLS: u32 = 65_536;
-
-impl InstantCacheConfig {
-    pub fn validate(&self) -> Result<(), TechniqueError> {
-        let bad = |field: &str, message: &str| {
-            Err(TechniqueError::InvalidConfig { field: field.into(), message: message.into() })
-        };
-        if self.vpls == 0 || self.vpls > MAX_VPLS {
-            return bad("vpls", &format!("must lie in 1..={MAX_VPLS}"));
-        }
-        if self.interleave == 0 || self.interleave > 16 {
-            return bad("interleave", "must lie in 1..=16");
-        }
-        if !(self.caching_radius > 0.0 && self.caching_radius <= 1.0) {
-            return bad("caching_radius", "must lie in (0, 1] (a fraction of the scene's diagonal)");
-        }
-        if !(self.clamp_distance >= 0.0 && self.clamp_distance <= 1.0) {
-            return bad("clamp_distance", "must lie in [0, 1] (a fraction of the scene's diagonal)");
-        }
-        if !(self.admitted_truncation > 0.0 && self.admitted_truncation < 1.0) {
-            return bad("admitted_truncation", "must lie in (0, 1)");
-        }
-        if self.spp == 0 || self.spp > super::path::MAX_SPP {
-            return bad("spp", &format!("must lie in 1..={}", super::path::MAX_SPP));
-        }
-        Ok(())
-    }
-}
-
-/// Per-tick figures of `instant_cache`.
-#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
-pub struct InstantCacheStats {
-    pub vpls: u64,
-    pub vpl_paths: u64,
-    pub vpl_rays: u64,
-    /// Records in the cache after this tick, and those made this tick.
-    pub records: u64,
-    pub records_created: u64,
-    /// Rays from cache records or pixels towards VPLs.
-    pub visibility_rays: u64,
-    pub camera_rays: u64,
-    pub specular_rays: u64,
-    pub shadow_rays: u64,
-    pub vpl_ms: f64,
-    /// The indirect component: record creation and interpolation, or the IGI gather and filter.
-    pub indirect_ms: f64,
-    pub render_ms: f64,
-    pub vpl_bytes: u64,
-    pub cache_bytes: u64,
+/// The scene's extent, fixed at the first tick so that record weights and the clamp distance
+/// keep their meaning while objects move.
+#[derive(Clone, Copy, Debug)]
+struct Extent {
+    lo: Vec3,
+    hi: Vec3,
+    diagonal: f32,
 }
 
 /// The `instant_cache` technique.
 pub struct InstantCache {
     config: InstantCacheConfig,
     vpls: Vec<Vpl>,
+    extent: Option<Extent>,
     cache: Option<Cache>,
+    /// On-demand re-evaluation: this tick's changes, for records flagged stale.
+    changes: Option<TickChanges>,
     passes: u64,
     pending: InstantCacheStats,
 }
@@ -167,44 +112,138 @@ struct Shaded {
 impl InstantCache {
     pub fn new(config: InstantCacheConfig, _scene: &Scene) -> Result<InstantCache, TechniqueError> {
         config.validate()?;
-        Ok(InstantCache { config, vpls: Vec::new(), cache: None, passes: 0, pending: InstantCacheStats::default() })
+        Ok(InstantCache {
+            config,
+            vpls: Vec::new(),
+            extent: None,
+            cache: None,
+            changes: None,
+            passes: 0,
+            pending: InstantCacheStats::default(),
+        })
     }
 
-    /// The scene's bounds and diagonal.
-    fn bounds(ctx: &RenderContext) -> (glam::Vec3, glam::Vec3, f32) {
-        let (lo, hi) = ctx.accel.scene().bounds().unwrap_or((glam::Vec3::ZERO, glam::Vec3::ONE));
-        (lo, hi, (hi - lo).length().max(f32::MIN_POSITIVE))
+    fn extent(&mut self, ctx: &RenderContext) -> Extent {
+        *self.extent.get_or_insert_with(|| {
+            let (lo, hi) = ctx.accel.scene().bounds().unwrap_or((Vec3::ZERO, Vec3::ONE));
+            Extent { lo, hi, diagonal: (hi - lo).length().max(f32::MIN_POSITIVE) }
+        })
     }
 
-    /// Indirect irradiance per pixel from the cache (records made on demand, in pixel order).
-    fn cached_indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded], min_distance: f32) -> Vec<Option<Rgb>> {
-        let (lo, hi, _) = Self::bounds(ctx);
-        let cache = self.cache.get_or_insert_with(|| Cache::new(lo, hi, self.config.caching_radius));
-        cache.clear();
-        let mut wanted = Vec::new();
-        for s in shaded {
-            if let Some(hit) = &s.sample.hit {
-                let n = hit.facing();
-                if !cache.covers(hit.p, n) {
-                    let (placeholder, _) = cache::compute_record(ctx.accel, &[], hit.p, n, min_distance);
-                    wanted.push(cache.insert(placeholder));
-                }
+    fn min_distance(&mut self, ctx: &RenderContext) -> f32 {
+        self.config.clamp_distance * self.extent(ctx).diagonal
+    }
+
+    /// `temporal`, at the start of a tick: ages the cache and applies what changed since the
+    /// VPLs `old_vpls` (cases 1–5), at once or by flagging records for on-demand re-evaluation.
+    fn invalidate(
+        &mut self,
+        ctx: &RenderContext,
+        delta: &SceneDelta,
+        old_vpls: Vec<Vpl>,
+    ) -> Result<(), TechniqueError> {
+        let min_distance = self.min_distance(ctx);
+        let diagonal = self.extent(ctx).diagonal;
+        let Some(cache) = self.cache.as_mut() else { return Ok(()) };
+        let stats = &mut self.pending;
+        stats.records_dropped_stale = cache.retain(|r| !r.stale);
+        self.changes = None;
+        let (tick, max_age) = (ctx.tick, self.config.max_age as u64);
+        stats.records_aged_out = cache.retain(|r| tick.saturating_sub(r.last_used) <= max_age);
+        let Some(changes) = TickChanges::new(ctx.scene, ctx.accel, delta, old_vpls, &self.vpls, diagonal)? else {
+            return Ok(());
+        };
+        stats.vpls_reused = changes.vpls.reused;
+        stats.vpls_reweighted = changes.vpls.reweighted;
+        stats.vpls_invalidated = changes.vpls.invalidated;
+        stats.records_removed_moved = cache.retain(|r| !changes.removes(r));
+        match self.config.reevaluation {
+            Reevaluation::Immediate => {
+                let vpls = &self.vpls;
+                let works: Vec<Refresh> =
+                    cache.records.par_iter_mut().map(|r| changes.refresh(ctx.accel, vpls, r, min_distance)).collect();
+                works.into_iter().for_each(|w| count_refresh(stats, w));
+            }
+            Reevaluation::OnDemand => {
+                cache.records.iter_mut().for_each(|r| r.stale = true);
+                self.changes = Some(changes);
             }
         }
-        let computed: Vec<(cache::Record, u64)> = wanted
+        Ok(())
+    }
+
+    /// Indirect irradiance per pixel from the cache: in pixel order, pixels no record covers
+    /// get a new one; then new and flagged records are computed in parallel and interpolated.
+    fn cached_indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded]) -> Vec<Option<Rgb>> {
+        let min_distance = self.min_distance(ctx);
+        let extent = self.extent(ctx);
+        let cache = self.cache.get_or_insert_with(|| Cache::new(extent.lo, extent.hi, self.config.caching_radius));
+        if self.config.mode == CacheMode::Static {
+            cache.clear();
+        }
+        // Coverage by records kept from earlier ticks does not depend on pixel order, so it is
+        // found in parallel; the rest is decided in pixel order, which keeps the image
+        // independent of the thread count.
+        let first_new = cache.records.len();
+        let kept_used: Vec<AtomicBool> = (0..first_new).map(|_| AtomicBool::new(false)).collect();
+        let covered_by_kept: Vec<bool> = shaded
             .par_iter()
-            .map(|&i| {
-                let r = &cache.records[i as usize];
-                cache::compute_record(ctx.accel, &self.vpls, r.position, r.normal, min_distance)
+            .map(|s| {
+                let Some(hit) = &s.sample.hit else { return true };
+                let mut covered = false;
+                cache.near(hit.p, hit.facing(), |i, _| {
+                    covered = true;
+                    kept_used[i as usize].store(true, Ordering::Relaxed);
+                });
+                covered
             })
             .collect();
-        for (&i, (record, rays)) in wanted.iter().zip(computed) {
-            self.pending.visibility_rays += rays;
-            cache.records[i as usize] = record;
+        let mut used: Vec<bool> = kept_used.into_iter().map(AtomicBool::into_inner).collect();
+        for (s, _) in shaded.iter().zip(&covered_by_kept).filter(|(_, &covered)| !covered) {
+            let Some(hit) = &s.sample.hit else { continue };
+            let n = hit.facing();
+            let mut covered = false;
+            cache.near(hit.p, n, |i, _| {
+                covered = true;
+                used[i as usize] = true;
+            });
+            if !covered {
+                cache.insert(Record::new(hit.p, n, hit.object, Vec::new(), ctx.tick));
+                used.push(true);
+            }
         }
-        self.pending.records_created += wanted.len() as u64;
-        self.pending.records = cache.records.len() as u64;
-        self.pending.cache_bytes = cache.memory_bytes();
+        let (vpls, changes, tick) = (&self.vpls, self.changes.as_ref(), ctx.tick);
+        let works: Vec<(u64, Option<Refresh>)> = cache
+            .records
+            .par_iter_mut()
+            .enumerate()
+            .filter(|(i, _)| used[*i])
+            .map(|(i, r)| {
+                r.last_used = tick;
+                if i >= first_new {
+                    let (fresh, rays) =
+                        cache::compute_record(ctx.accel, vpls, r.position, r.normal, r.object, min_distance, tick);
+                    *r = fresh;
+                    (rays, None)
+                } else if let (true, Some(changes)) = (r.stale, changes) {
+                    r.stale = false;
+                    (0, Some(changes.refresh(ctx.accel, vpls, r, min_distance)))
+                } else {
+                    (0, None)
+                }
+            })
+            .collect();
+        let stats = &mut self.pending;
+        stats.records_created += (cache.records.len() - first_new) as u64;
+        stats.records_reused += used[..first_new].iter().filter(|&&u| u).count() as u64;
+        for (rays, refresh) in works {
+            stats.visibility_rays_new += rays;
+            if let Some(w) = refresh {
+                count_refresh(stats, w);
+            }
+        }
+        stats.records = cache.records.len() as u64;
+        stats.cache_bytes = cache.memory_bytes();
         let cache = &*cache;
         shaded
             .par_iter()
@@ -212,8 +251,21 @@ impl InstantCache {
             .collect()
     }
 
+    /// With `audit`: checks every record against a fresh computation (not timed as indirect).
+    fn audit(&mut self, ctx: &RenderContext) {
+        let min_distance = self.min_distance(ctx);
+        let reach = 10.0 * temporal::BOX_SLACK * self.extent(ctx).diagonal;
+        let Some(cache) = &self.cache else { return };
+        let audit = cache::audit(ctx.accel, cache, &self.vpls, min_distance, reach);
+        self.pending.audit_records += audit.records;
+        self.pending.audit_mismatched += audit.mismatched;
+        self.pending.audit_off_surface += audit.off_surface;
+        self.pending.audit_digest = audit.digest;
+    }
+
     /// Indirect irradiance per pixel by IGI's interleaved gather and discontinuity buffer.
-    fn igi_indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded], min_distance: f32) -> Vec<Option<Rgb>> {
+    fn igi_indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded]) -> Vec<Option<Rgb>> {
+        let min_distance = self.min_distance(ctx);
         let width = ctx.scene.camera.width as usize;
         let n = self.config.interleave as usize;
         let camera = ctx.scene.camera.ray(0.5 * width as f32, 0.0).origin;
@@ -230,11 +282,24 @@ impl InstantCache {
                 None => (Rgb::BLACK, 0),
             })
             .collect();
-        self.pending.visibility_rays += gathered.iter().map(|g| g.1).sum::<u64>();
+        self.pending.visibility_rays_new += gathered.iter().map(|g| g.1).sum::<u64>();
         let raw: Vec<Rgb> = gathered.into_iter().map(|g| g.0).collect();
         let filtered = igi::filter(&hits, &raw, width, n);
         hits.iter().zip(filtered).map(|(h, e)| h.map(|_| e)).collect()
     }
+}
+
+/// Adds one record's re-evaluation to the tick's figures.
+fn count_refresh(stats: &mut InstantCacheStats, w: Refresh) {
+    stats.records_refreshed += 1;
+    stats.records_invalidated_vpl += u64::from(w.vpl_rays + w.reweighted > 0);
+    stats.records_invalidated_occluded += u64::from(w.occluded > 0);
+    stats.records_invalidated_deoccluded += u64::from(w.deoccluded > 0);
+    stats.visibility_rays_vpl += w.vpl_rays;
+    stats.visibility_rays_occlusion += w.occlusion_rays;
+    stats.occlusion_box_tests += w.occlusion_box_tests;
+    stats.visibility_rays_deocclusion += w.deocclusion_rays;
+    stats.deocclusion_box_tests += w.deocclusion_box_tests;
 }
 
 impl Technique for InstantCache {
@@ -250,12 +315,17 @@ impl Technique for InstantCache {
         // About `vpls` VPLs: a path leaves 1/(1 − ρ_S) on average; at most 4× that are kept.
         let paths = ((self.config.vpls as f32 * (1.0 - rho.clamp(0.0, 0.95))).ceil() as u64).max(1);
         let (vpls, rays) = vpl::shoot(ctx.scene, ctx.accel, paths, 4 * self.config.vpls as usize, l_m);
-        self.vpls = vpls;
+        let old_vpls = std::mem::replace(&mut self.vpls, vpls);
         self.pending.vpls = self.vpls.len() as u64;
         self.pending.vpl_paths = paths;
         self.pending.vpl_rays = rays;
         self.pending.vpl_bytes = (self.vpls.len() * std::mem::size_of::<Vpl>()) as u64;
         self.pending.vpl_ms = t.elapsed().as_secs_f64() * 1e3;
+        if self.config.mode == CacheMode::Temporal {
+            let t = Instant::now();
+            self.invalidate(ctx, delta, old_vpls)?;
+            self.pending.invalidate_ms = t.elapsed().as_secs_f64() * 1e3;
+        }
         if !delta.is_empty() {
             self.passes = 0;
         }
@@ -266,15 +336,18 @@ impl Technique for InstantCache {
         let start = Instant::now();
         let scene = ctx.scene;
         let pixels = (scene.camera.width * scene.camera.height) as usize;
-        let (_, _, diagonal) = Self::bounds(ctx);
-        let min_distance = self.config.clamp_distance * diagonal;
-        for _ in 0..self.config.spp {
+        for pass_in_tick in 0..self.config.spp as u64 {
             let pass = self.passes;
             let shaded: Vec<Shaded> = (0..pixels)
                 .into_par_iter()
                 .map(|i| {
                     let mut rng = Rng::for_sample(ctx.seed, ctx.tick, i as u64, pass);
-                    let sample = camera_chain::trace(scene, ctx.accel, i, &mut rng);
+                    let jitter = match self.config.mode {
+                        // The same sub-pixel points every tick, so a still view finds its records.
+                        CacheMode::Temporal => Rng::for_sample(ctx.seed, 0, i as u64, pass_in_tick).next_2d(),
+                        CacheMode::Igi | CacheMode::Static => rng.next_2d(),
+                    };
+                    let sample = camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng);
                     let (direct, shadow) = match &sample.hit {
                         Some(hit) => camera_chain::direct_light(scene, ctx.accel, hit, &mut rng),
                         None => (Rgb::BLACK, false),
@@ -284,10 +357,13 @@ impl Technique for InstantCache {
                 .collect();
             let t = Instant::now();
             let indirect = match self.config.mode {
-                CacheMode::Igi => self.igi_indirect(ctx, &shaded, min_distance),
-                CacheMode::Static => self.cached_indirect(ctx, &shaded, min_distance),
+                CacheMode::Igi => self.igi_indirect(ctx, &shaded),
+                CacheMode::Static | CacheMode::Temporal => self.cached_indirect(ctx, &shaded),
             };
             self.pending.indirect_ms += t.elapsed().as_secs_f64() * 1e3;
+            if self.config.audit {
+                self.audit(ctx);
+            }
             let radiance: Vec<Rgb> = shaded
                 .iter()
                 .zip(&indirect)
@@ -317,6 +393,10 @@ impl Technique for InstantCache {
         }
         let mut stats = std::mem::take(&mut self.pending);
         stats.render_ms = start.elapsed().as_secs_f64() * 1e3;
+        stats.visibility_rays = stats.visibility_rays_new
+            + stats.visibility_rays_vpl
+            + stats.visibility_rays_occlusion
+            + stats.visibility_rays_deocclusion;
         let rays = RayCounts {
             primary: stats.camera_rays,
             secondary: stats.specular_rays + stats.vpl_rays,

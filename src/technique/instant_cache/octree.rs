@@ -13,6 +13,10 @@ struct Node {
     items: Vec<u32>,
 }
 
+/// Deepest level below the root; a query's stack holds at most 7 per level plus one.
+const MAX_DEPTH: u32 = 32;
+const QUERY_STACK: usize = 7 * MAX_DEPTH as usize + 8;
+
 #[derive(Clone, Debug)]
 pub struct Octree {
     nodes: Vec<Node>,
@@ -23,8 +27,10 @@ pub struct Octree {
 impl Octree {
     /// An empty octree over the cube of half-width `half` around `centre`, for query radius `r`.
     pub fn new(centre: Vec3, half: f32, r: f32) -> Octree {
-        let root = Node { centre, half: half.max(r), children: None, items: Vec::new() };
-        Octree { nodes: vec![root], min_half: r }
+        let half = half.max(r);
+        let root = Node { centre, half, children: None, items: Vec::new() };
+        // At most MAX_DEPTH levels, so a query's stack stays within QUERY_STACK.
+        Octree { nodes: vec![root], min_half: r.max(half / (1u64 << MAX_DEPTH) as f32) }
     }
 
     pub fn clear(&mut self) {
@@ -74,8 +80,11 @@ impl Octree {
     /// Calls `f` with every record whose position may lie within `r` of `p` (a superset; the
     /// caller tests the distance).
     pub fn query(&self, p: Vec3, r: f32, mut f: impl FnMut(u32)) {
-        let mut stack = vec![0usize];
-        while let Some(at) = stack.pop() {
+        let mut stack = [0u32; QUERY_STACK];
+        let mut top = 1;
+        while top > 0 {
+            top -= 1;
+            let at = stack[top] as usize;
             let n = &self.nodes[at];
             // A node's records lie inside it, except the root's strays: test the root always.
             if at != 0 && ((p - n.centre).abs() - Vec3::splat(n.half)).max(Vec3::ZERO).length() > r {
@@ -83,7 +92,8 @@ impl Octree {
             }
             n.items.iter().for_each(|&i| f(i));
             if let Some(c) = n.children {
-                stack.extend(c.iter().map(|&k| k as usize));
+                stack[top..top + 8].copy_from_slice(&c);
+                top += 8;
             }
         }
     }

@@ -3,10 +3,10 @@
 //!
 //! Path i draws dimension d of its Halton point i + 1: 0 picks the light (by power), 1–2 the
 //! point, 3–4 the direction, then 4 per bounce (2 for the BSDF direction, 1 for the lobe,
-//! 1 for Russian roulette). When nothing changes the VPLs are the same every tick, and VPL k is the k-th
-//! deposited, so a VPL keeps its index (and its visibility rays stay comparable) until what it
-//! depends on changes. A VPL's `intensity` is Φ·ρ/π, the radiant intensity per unit cosine of
-//! the flux Φ it reflects diffusely; Φ is the light's power over the number of paths shot.
+//! 1 for Russian roulette). When nothing changes the VPLs are the same every tick. A VPL's `key`
+//! (path, bounce) stays the same until what it depends on changes, so visibility rays are
+//! matched across ticks by key. A VPL's `intensity` is Φ·ρ/π, the radiant intensity per unit
+//! cosine of the flux Φ it reflects diffusely; Φ is the light's power over the paths shot.
 use crate::core::{offset_ray_origin, Rgb};
 use crate::embree::Ray;
 use crate::scene::{Scene, SceneAccel, SurfaceId};
@@ -66,6 +66,9 @@ pub struct Vpl {
     /// Φ·ρ/π (W/sr per unit cosine).
     pub intensity: Rgb,
     pub object: u32,
+    /// Stable identity: (path index − 1) · [`MAX_VPL_BOUNCES`] + bounce. Ticks compare VPLs by
+    /// key, so a path that gains or loses a bounce does not renumber the VPLs of later paths.
+    pub key: u32,
 }
 
 /// Shoots `paths` photon paths (Halton points 1..=paths) and returns their VPLs (at most
@@ -100,7 +103,8 @@ pub fn shoot(scene: &Scene, accel: &SceneAccel, paths: u64, max_vpls: usize, max
                 }
                 let facing = if sp.n.dot(wo) >= 0.0 { sp.n } else { -sp.n };
                 let intensity = power * material.diffuse_reflectance() * FRAC_1_PI;
-                vpls.push(Vpl { position: sp.p, normal: facing, intensity, object });
+                let key = (index - 1) as u32 * MAX_VPL_BOUNCES + bounce as u32;
+                vpls.push(Vpl { position: sp.p, normal: facing, intensity, object, key });
             }
             let d = 5 + 4 * bounce;
             let Some(bs) = material.sample(sp.n, wo, Vec2::new(u(d), u(d + 1)), u(d + 2)) else { break };

@@ -185,7 +185,8 @@ pub fn render_chunk(
     for (offset, pixel) in chunk.iter_mut().enumerate() {
         let index = first + offset;
         let mut rng = Rng::for_sample(seed, tick, index as u64, pass);
-        let sample = camera_chain::trace(scene, accel, index, &mut rng);
+        let jitter = rng.next_2d();
+        let sample = camera_chain::trace(scene, accel, index, jitter, &mut rng);
         rays.camera += 1;
         rays.specular += sample.specular_rays;
         let mut radiance = sample.emitted;

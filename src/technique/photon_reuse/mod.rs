@@ -70,8 +70,8 @@ pub use distribution::{DistributionMap, MapResolution, MAX_CELLS};
 pub use gather::PhotonGrid;
 pub use stats::PhotonStats;
 pub use store::{PathStore, PathWord, StoreMemory};
-pub use verify::segment_hits_box;
 
+use super::box_tree::BoxTree;
 use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -82,7 +82,7 @@ use lights::{MappedLight, Moved};
 use rayon::prelude::*;
 use std::time::Instant;
 use trace::{Retrace, TracedTail, Tracer};
-use verify::{BoxTree, Changes};
+use verify::Changes;
 
 /// Where a path stands during one tick's verification.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

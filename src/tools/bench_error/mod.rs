@@ -9,13 +9,12 @@ mod reference;
 mod report;
 
 use super::render::load_scene;
-use super::{SceneArgs, UsageError};
+use super::{progress_bar, SceneArgs, UsageError};
 use crate::embree::Device;
 use crate::engine::{thread_pool, Session};
 use crate::scene::animation::Animation;
 use crate::technique::TechniqueConfig;
 use anyhow::{Context, Result};
-use indicatif::{ProgressBar, ProgressStyle};
 use metrics::ImageError;
 use reference::{Reference, ReferenceKey};
 use serde::Serialize;
@@ -104,25 +103,6 @@ pub struct ErrorReport {
     pub frames: Vec<FrameResult>,
 }
 
-pub fn median(values: &[f64]) -> f64 {
-    let mut v = values.to_vec();
-    v.sort_by(f64::total_cmp);
-    if v.is_empty() {
-        0.0
-    } else {
-        v[v.len() / 2]
-    }
-}
-
-fn bar(len: u64, unit: &str) -> Result<ProgressBar> {
-    let bar = ProgressBar::new(len);
-    bar.set_style(
-        ProgressStyle::with_template(&format!("{{msg:28}} [{{bar:30}}] {{pos}}/{{len}} {unit} ({{eta}} left)"))?
-            .progress_chars("=> "),
-    );
-    Ok(bar)
-}
-
 pub fn run(args: ErrorArgs) -> Result<()> {
     if args.frames == 0 || args.every == 0 || args.repeats == 0 || args.ref_spp == 0 {
         return Err(UsageError("--frames, --every, --repeats and --ref-spp must be at least 1".into()).into());
@@ -155,7 +135,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
     let time_of = |frame: u32| if animation.is_some() { frame as f32 / args.fps } else { 0.0 };
     let mut times: Vec<f32> = measured.iter().map(|&f| time_of(f)).collect();
     times.dedup();
-    let refs_bar = bar(times.len() as u64 * (args.ref_spp / 2).max(1) as u64 * 2, "spp")?;
+    let refs_bar = progress_bar(times.len() as u64 * (args.ref_spp / 2).max(1) as u64 * 2, "spp")?;
     refs_bar.set_message("references (path)");
     let mut references: Vec<(f32, Reference)> = Vec::new();
     pool.install(|| -> Result<()> {
@@ -178,7 +158,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
     let reference_at = |time: f32| references.iter().find(|(t, _)| *t == time).map(|(_, r)| r);
 
     // Every configuration, repeated; errors from the first run (the seed makes them the same).
-    let run_bar = bar(configs.len() as u64 * args.repeats as u64 * args.frames as u64, "frames")?;
+    let run_bar = progress_bar(configs.len() as u64 * args.repeats as u64 * args.frames as u64, "frames")?;
     let mut frames: Vec<FrameResult> = Vec::new();
     let mut error_maps: BTreeMap<String, (u32, f64, Vec<u8>)> = BTreeMap::new();
     for config in &configs {

@@ -1,7 +1,8 @@
 //! Summaries and files of `relume bench error`: `results.csv`, `results.json`, `report.md` and
 //! `errors/<config>.png` (the FLIP map of each configuration's worst measured frame, in magma).
-use super::{median, ConfigSummary, ErrorReport, FrameResult};
+use super::{ConfigSummary, ErrorReport, FrameResult};
 use crate::technique::TechniqueConfig;
+use crate::tools::quantile;
 use anyhow::{Context, Result};
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -15,9 +16,10 @@ pub fn merge_repeats(mut runs: Vec<Vec<FrameResult>>) -> Vec<FrameResult> {
     for (i, f) in first.iter_mut().enumerate() {
         let at = |r: &Vec<FrameResult>| r.get(i).cloned();
         let all: Vec<FrameResult> = std::iter::once(f.clone()).chain(rest.iter().filter_map(at)).collect();
-        f.tick_ms = median(&all.iter().map(|x| x.tick_ms).collect::<Vec<_>>());
+        f.tick_ms = quantile(&all.iter().map(|x| x.tick_ms).collect::<Vec<_>>(), 0.5);
         for (stage, ms) in f.stages_ms.iter_mut() {
-            *ms = median(&all.iter().map(|x| x.stages_ms.get(stage).copied().unwrap_or(0.0)).collect::<Vec<_>>());
+            *ms =
+                quantile(&all.iter().map(|x| x.stages_ms.get(stage).copied().unwrap_or(0.0)).collect::<Vec<_>>(), 0.5);
         }
     }
     first
@@ -40,12 +42,12 @@ pub fn summarise(configs: &[TechniqueConfig], frames: &[FrameResult]) -> Vec<Con
                 .map(|f| f.stages_ms.keys().copied().collect::<Vec<_>>())
                 .unwrap_or_default()
                 .into_iter()
-                .map(|k| (k, median(&mine.iter().map(|f| f.stages_ms[k]).collect::<Vec<_>>())))
+                .map(|k| (k, quantile(&mine.iter().map(|f| f.stages_ms[k]).collect::<Vec<_>>(), 0.5)))
                 .collect();
             ConfigSummary {
                 config: label,
-                tick_ms_median: median(&mine.iter().map(|f| f.tick_ms).collect::<Vec<_>>()),
-                rays_per_frame_median: median(&mine.iter().map(|f| f.rays as f64).collect::<Vec<_>>()),
+                tick_ms_median: quantile(&mine.iter().map(|f| f.tick_ms).collect::<Vec<_>>(), 0.5),
+                rays_per_frame_median: quantile(&mine.iter().map(|f| f.rays as f64).collect::<Vec<_>>(), 0.5),
                 rel_mse: mean(|e| e.rel_mse),
                 rmse: mean(|e| e.rmse),
                 psnr_db: mean(|e| e.psnr_db),

@@ -1,0 +1,184 @@
+//! Segment-against-box tests for what moved this tick, shared by the techniques that verify
+//! stored rays against moved objects (`photon_reuse` path segments, `instant_cache` visibility
+//! rays).
+//!
+//! Boxes are world-space AABBs in scene units. Tests are conservative: touching a face counts,
+//! so a false positive only costs a more exact test later, never a missed change.
+use crate::scene::edits::Aabb;
+use glam::{Vec3, Vec3A};
+
+/// A bounding-volume hierarchy over the moved boxes: a segment that misses a node's bounds
+/// skips all the boxes below it. Built by median split on the longest axis of the centroids.
+#[derive(Clone, Debug, Default)]
+pub struct BoxTree {
+    nodes: Vec<BoxNode>,
+    boxes: Vec<Aabb>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct BoxNode {
+    bounds: Aabb,
+    /// Leaf: boxes[first..first + count]; inner: children at `first` and `first + 1`.
+    first: u32,
+    count: u32,
+}
+
+/// Boxes per leaf.
+const LEAF_BOXES: usize = 2;
+
+impl BoxTree {
+    pub fn new(mut boxes: Vec<Aabb>) -> BoxTree {
+        let mut tree = BoxTree { nodes: Vec::new(), boxes: Vec::new() };
+        if boxes.is_empty() {
+            return tree;
+        }
+        tree.nodes.push(BoxNode { bounds: boxes[0], first: 0, count: 0 });
+        tree.split(0, &mut boxes);
+        tree
+    }
+
+    fn split(&mut self, node: usize, boxes: &mut [Aabb]) {
+        let bounds = boxes.iter().skip(1).fold(boxes[0], |b, x| b.union(x));
+        if boxes.len() <= LEAF_BOXES {
+            self.nodes[node] = BoxNode { bounds, first: self.boxes.len() as u32, count: boxes.len() as u32 };
+            self.boxes.extend_from_slice(boxes);
+            return;
+        }
+        let centre = |b: &Aabb| (b.min + b.max) * 0.5;
+        let spread = boxes.iter().fold(Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY }, |a, b| Aabb {
+            min: a.min.min(centre(b)),
+            max: a.max.max(centre(b)),
+        });
+        let extent = spread.max - spread.min;
+        let axis = if extent.x >= extent.y && extent.x >= extent.z {
+            0
+        } else if extent.y >= extent.z {
+            1
+        } else {
+            2
+        };
+        boxes.sort_by(|a, b| centre(a)[axis].total_cmp(&centre(b)[axis]));
+        let children = self.nodes.len();
+        self.nodes[node] = BoxNode { bounds, first: children as u32, count: 0 };
+        self.nodes.push(BoxNode { bounds, first: 0, count: 0 });
+        self.nodes.push(BoxNode { bounds, first: 0, count: 0 });
+        let (left, right) = boxes.split_at_mut(boxes.len() / 2);
+        self.split(children, left);
+        self.split(children + 1, right);
+    }
+
+    /// Does the segment touch any box? Returns the answer and the box and node tests made.
+    pub fn hits(&self, origin: Vec3, dir: Vec3, t_max: f32) -> (bool, u64) {
+        if self.nodes.is_empty() {
+            return (false, 0);
+        }
+        // With no zero component the reciprocal direction serves every box; otherwise the exact
+        // per-axis test handles the parallel slabs.
+        let fast = dir.x != 0.0 && dir.y != 0.0 && dir.z != 0.0;
+        let (o, inv) = (Vec3A::from(origin), Vec3A::ONE / Vec3A::from(dir));
+        let touches = |b: &Aabb| {
+            if fast {
+                let t0 = (Vec3A::from(b.min) - o) * inv;
+                let t1 = (Vec3A::from(b.max) - o) * inv;
+                t0.min(t1).max_element().max(0.0) <= t0.max(t1).min_element().min(t_max)
+            } else {
+                segment_hits_box(origin, dir, t_max, b)
+            }
+        };
+        let mut stack = [0u32; 64];
+        let mut top = 1;
+        let mut tests = 0u64;
+        while top > 0 {
+            top -= 1;
+            let n = self.nodes[stack[top] as usize];
+            // A leaf's own boxes are as cheap to test as its bounds, so only inner nodes cull.
+            if n.count == 0 {
+                tests += 1;
+                if !touches(&n.bounds) {
+                    continue;
+                }
+            }
+            if n.count > 0 {
+                for b in &self.boxes[n.first as usize..(n.first + n.count) as usize] {
+                    tests += 1;
+                    if touches(b) {
+                        return (true, tests);
+                    }
+                }
+            } else if top + 2 <= stack.len() {
+                stack[top] = n.first;
+                stack[top + 1] = n.first + 1;
+                top += 2;
+            }
+        }
+        (false, tests)
+    }
+}
+
+/// Does the segment `origin + t·dir`, t ∈ [0, t_max], touch the box? (Slab test; touching a
+/// face counts, which keeps the test conservative.)
+pub fn segment_hits_box(origin: Vec3, dir: Vec3, t_max: f32, b: &Aabb) -> bool {
+    let (mut near, mut far) = (0.0f32, t_max);
+    for axis in 0..3 {
+        let (o, d, lo, hi) = (origin[axis], dir[axis], b.min[axis], b.max[axis]);
+        if d == 0.0 {
+            // Parallel to this slab: inside it or never.
+            if o < lo || o > hi {
+                return false;
+            }
+            continue;
+        }
+        let (t0, t1) = ((lo - o) / d, (hi - o) / d);
+        near = near.max(t0.min(t1));
+        far = far.min(t0.max(t1));
+        if near > far {
+            return false;
+        }
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn slab_test_against_analytic_cases() {
+        let b = Aabb { min: Vec3::splat(-1.0), max: Vec3::splat(1.0) };
+        assert!(segment_hits_box(Vec3::new(-5.0, 0.0, 0.0), Vec3::new(10.0, 0.0, 0.0), 1.0, &b));
+        assert!(!segment_hits_box(Vec3::new(-5.0, 0.0, 0.0), Vec3::new(3.0, 0.0, 0.0), 1.0, &b), "stops short");
+        assert!(!segment_hits_box(Vec3::new(-5.0, 2.0, 0.0), Vec3::new(10.0, 0.0, 0.0), 1.0, &b), "passes above");
+        assert!(segment_hits_box(Vec3::new(-5.0, 1.0, 0.0), Vec3::new(10.0, 0.0, 0.0), 1.0, &b), "grazes the face");
+        assert!(segment_hits_box(Vec3::ZERO, Vec3::X, 0.1, &b), "starts inside");
+        assert!(segment_hits_box(Vec3::new(0.0, 0.0, -9.0), Vec3::Z, f32::INFINITY, &b), "infinite escape ray");
+        assert!(!segment_hits_box(Vec3::new(0.0, 0.0, 9.0), Vec3::Z, f32::INFINITY, &b), "escape ray pointing away");
+    }
+
+    #[test]
+    fn the_box_tree_answers_like_a_linear_scan() {
+        let mut rng = crate::core::Rng::new(3, 4);
+        let mut v = || rng.next_f32() * 20.0 - 10.0;
+        let boxes: Vec<Aabb> = (0..23)
+            .map(|_| {
+                let c = Vec3::new(v(), v(), v());
+                let h = Vec3::new(v().abs(), v().abs(), v().abs()) * 0.1;
+                Aabb { min: c - h, max: c + h }
+            })
+            .collect();
+        let tree = BoxTree::new(boxes.clone());
+        let (mut hits, mut tree_tests) = (0, 0);
+        for i in 0..5000 {
+            let o = Vec3::new(v(), v(), v());
+            let d = Vec3::new(v(), v(), v()) * if i % 3 == 0 { 0.1 } else { 1.0 };
+            let t_max = if i % 7 == 0 { f32::INFINITY } else { 1.0 };
+            let linear = boxes.iter().any(|b| segment_hits_box(o, d, t_max, b));
+            let (tree_answer, tests) = tree.hits(o, d, t_max);
+            assert_eq!(tree_answer, linear, "segment {i}");
+            hits += usize::from(linear);
+            tree_tests += tests;
+        }
+        assert!(hits > 100 && hits < 4900, "a poor test set: {hits} hits");
+        assert!(tree_tests < 5000 * 23, "the tree made more tests than a linear scan");
+        assert_eq!(BoxTree::new(Vec::new()).hits(Vec3::ZERO, Vec3::X, 1.0), (false, 0));
+    }
+}

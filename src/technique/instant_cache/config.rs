@@ -1,0 +1,157 @@
+//! `instant_cache`'s configuration (validated as the service receives it) and its per-tick
+//! figures. Distances are fractions of the scene's bounding diagonal; times in milliseconds;
+//! memory in bytes.
+use crate::technique::TechniqueError;
+use serde::{Deserialize, Serialize};
+
+/// How indirect light is gathered.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CacheMode {
+    /// Instant global illumination: interleaved VPL subsets and a discontinuity buffer.
+    Igi,
+    /// The instant cache, rebuilt every tick.
+    Static,
+    /// The instant cache kept across ticks; only what edits invalidated is re-evaluated.
+    Temporal,
+}
+
+/// When `temporal` re-evaluates what a tick invalidated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Reevaluation {
+    /// Every record at the start of the tick (Algorithm 1).
+    #[default]
+    Immediate,
+    /// Records are flagged and re-evaluated when first interpolated; flagged records no pixel
+    /// used are dropped at the next tick.
+    OnDemand,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InstantCacheConfig {
+    pub mode: CacheMode,
+    pub vpls: u32,
+    pub interleave: u32,
+    pub caching_radius: f32,
+    pub clamp_distance: f32,
+    pub admitted_truncation: f32,
+    pub spp: u32,
+    pub reevaluation: Reevaluation,
+    /// `temporal`: records no pixel used for this many ticks are dropped.
+    pub max_age: u32,
+    /// After each pass, recompute every record from scratch and report the records that differ
+    /// (`audit_*` stats). Costs a static cache's work per pass; for tests and benchmarks.
+    pub audit: bool,
+}
+
+impl Default for InstantCacheConfig {
+    fn default() -> InstantCacheConfig {
+        InstantCacheConfig {
+            mode: CacheMode::Temporal,
+            vpls: 256,
+            interleave: 4,
+            caching_radius: 0.05,
+            clamp_distance: 0.01,
+            admitted_truncation: 0.01,
+            spp: 1,
+            reevaluation: Reevaluation::Immediate,
+            max_age: 16,
+            audit: false,
+        }
+    }
+}
+
+/// Most VPLs a tick may shoot.
+pub const MAX_VPLS: u32 = 65_536;
+
+impl InstantCacheConfig {
+    pub fn validate(&self) -> Result<(), TechniqueError> {
+        let bad = |field: &str, message: &str| {
+            Err(TechniqueError::InvalidConfig { field: field.into(), message: message.into() })
+        };
+        if self.vpls == 0 || self.vpls > MAX_VPLS {
+            return bad("vpls", &format!("must lie in 1..={MAX_VPLS}"));
+        }
+        if self.interleave == 0 || self.interleave > 16 {
+            return bad("interleave", "must lie in 1..=16");
+        }
+        if !(self.caching_radius > 0.0 && self.caching_radius <= 1.0) {
+            return bad("caching_radius", "must lie in (0, 1] (a fraction of the scene's diagonal)");
+        }
+        if !(self.clamp_distance >= 0.0 && self.clamp_distance <= 1.0) {
+            return bad("clamp_distance", "must lie in [0, 1] (a fraction of the scene's diagonal)");
+        }
+        if !(self.admitted_truncation > 0.0 && self.admitted_truncation < 1.0) {
+            return bad("admitted_truncation", "must lie in (0, 1)");
+        }
+        if self.spp == 0 || self.spp > crate::technique::path::MAX_SPP {
+            return bad("spp", &format!("must lie in 1..={}", crate::technique::path::MAX_SPP));
+        }
+        if self.max_age == 0 {
+            return bad("max_age", "must be at least 1 tick");
+        }
+        Ok(())
+    }
+}
+
+/// Per-tick figures of `instant_cache`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct InstantCacheStats {
+    pub vpls: u64,
+    pub vpl_paths: u64,
+    pub vpl_rays: u64,
+    /// `temporal`: this tick's VPLs against last tick's, by key (cases 1–2).
+    pub vpls_reused: u64,
+    pub vpls_reweighted: u64,
+    pub vpls_invalidated: u64,
+    /// Records in the cache after this tick, made this tick, and kept from earlier ticks and
+    /// interpolated this tick.
+    pub records: u64,
+    pub records_created: u64,
+    pub records_reused: u64,
+    /// `temporal`: records re-evaluated, and by case those with a ray retraced or a
+    /// contribution changed (`vpl`: cases 1–2, a VPL moved, appeared or changed intensity).
+    pub records_refreshed: u64,
+    pub records_invalidated_vpl: u64,
+    pub records_invalidated_occluded: u64,
+    pub records_invalidated_deoccluded: u64,
+    /// Case 5: removed because they lay on an object that moved.
+    pub records_removed_moved: u64,
+    pub records_aged_out: u64,
+    /// On-demand: flagged records no pixel used, dropped.
+    pub records_dropped_stale: u64,
+    /// Every ray from a record or pixel towards a VPL; the kinds below add up to it.
+    pub visibility_rays: u64,
+    /// Rays of records made this tick (and of `igi`'s gather).
+    pub visibility_rays_new: u64,
+    /// Case 1–2 rays (changed VPLs) against the full scene.
+    pub visibility_rays_vpl: u64,
+    /// Case 3 rays against the moved surfaces only, and the box tests that selected them.
+    pub visibility_rays_occlusion: u64,
+    pub occlusion_box_tests: u64,
+    /// Case 4 rays against the full scene, and the old-bounds tests that selected them.
+    pub visibility_rays_deocclusion: u64,
+    pub deocclusion_box_tests: u64,
+    pub camera_rays: u64,
+    pub specular_rays: u64,
+    pub shadow_rays: u64,
+    pub vpl_ms: f64,
+    /// `temporal`: ageing, case 5 and (immediate) re-evaluation at the start of the tick.
+    pub invalidate_ms: f64,
+    /// The indirect component: record creation, on-demand re-evaluation and interpolation, or
+    /// the IGI gather and filter.
+    pub indirect_ms: f64,
+    pub render_ms: f64,
+    pub vpl_bytes: u64,
+    pub cache_bytes: u64,
+    /// With `audit`: records checked, those differing from a fresh computation, and those no
+    /// longer on any surface.
+    pub audit_records: u64,
+    pub audit_mismatched: u64,
+    pub audit_off_surface: u64,
+    /// A hash of the audited records (positions, normals, contributions): equal caches, equal
+    /// digests.
+    pub audit_digest: u64,
+}

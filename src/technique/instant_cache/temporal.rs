@@ -1,0 +1,265 @@
+//! Temporal instant caching (Debattista et al. §3.2, Algorithm 1): the cache is kept across
+//! ticks and only what this tick's edits invalidated is re-evaluated.
+//!
+//! Per record and VPL (matched to last tick's VPL by key, `vpl.rs`):
+//! - **Cases 1–2** (VPL occluded or deoccluded, a light moved, a material changed): a VPL whose
+//!   position or normal changed, or which is new, gets its visibility ray traced against the
+//!   full scene. A VPL that kept its place but changed intensity keeps its visibility.
+//! - **Case 3** (ray now occluded): every other ray that touches a moved surface's new bounds
+//!   is traced against a separate scene holding only the moved surfaces where they are now
+//!   (the same bottom-level scenes and transforms as the full scene, so the answer is the one
+//!   the full scene would give for them).
+//! - **Case 4** (ray deoccluded): a ray that was in shadow and not found occluded by case 3 is
+//!   tested against the moved surfaces' old world AABBs; only if it touches one is it traced
+//!   against the full scene.
+//! - **Case 5** (record on a moved object): removed; the areas are refilled on demand. The
+//!   paper finds these records as those inside the moved objects' old bounds; a record here
+//!   knows its object, so records on static surfaces inside those bounds (the floor under a
+//!   bunny) stay and are refreshed like any other, instead of being recomputed.
+//!
+//! Invariant (tested): after a refresh every record's contributions and irradiance are
+//! bit-identical to a record computed from scratch at its position with this tick's VPLs. The
+//! argument: a ray's answer changes only if a moved surface lies on it now (case 3, traced
+//! against exactly those surfaces) or lay on it before (then it touched the old bounds and case 4
+//! retraces it); a VPL that moved is retraced outright; everything else is untouched geometry.
+//! Boxes are widened by [`BOX_SLACK`] of the scene diagonal so a ray grazing a box in Embree's
+//! arithmetic is never missed by the slab test's. Tiny contributions RGBE rounds to zero are
+//! indistinguishable from shadow; both give zero whichever way they are classified, except
+//! when a VPL's intensity changes, and then such a ray is retraced.
+use super::cache::{contribution, Record};
+use super::rgbe;
+use super::vpl::{irradiance_from, visibility_ray, Vpl};
+use crate::embree::{CommittedScene, EmbreeError};
+use crate::scene::edits::{Aabb, MovedSurface, SceneDelta};
+use crate::scene::{Scene, SceneAccel, SurfaceId};
+use crate::technique::box_tree::BoxTree;
+use glam::Vec3;
+
+/// Widening of every moved box, as a fraction of the scene's bounding diagonal.
+pub const BOX_SLACK: f32 = 1e-4;
+
+/// How a VPL of this tick relates to last tick's VPL with the same key.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VplChange {
+    /// Identical: last tick's index.
+    Same(u32),
+    /// Same position and normal, another intensity: its visibility carries over.
+    Reweighted(u32),
+    /// New or moved: traced against the full scene (cases 1–2).
+    Invalidated,
+}
+
+/// This tick's VPLs against last tick's.
+#[derive(Clone, Debug, Default)]
+pub struct VplDiff {
+    pub changes: Vec<VplChange>,
+    /// Every VPL is `Same` at its old index and none was lost.
+    pub identity: bool,
+    pub reused: u64,
+    pub reweighted: u64,
+    pub invalidated: u64,
+}
+
+impl VplDiff {
+    /// Matches `new` to `old` by key; both are in key order, as `vpl::shoot` deposits them.
+    pub fn between(old: &[Vpl], new: &[Vpl]) -> VplDiff {
+        let mut diff = VplDiff { identity: old.len() == new.len(), ..VplDiff::default() };
+        let mut j = 0;
+        for (i, v) in new.iter().enumerate() {
+            while j < old.len() && old[j].key < v.key {
+                j += 1;
+            }
+            let change = match old.get(j) {
+                Some(o) if o.key == v.key && o.position == v.position && o.normal == v.normal => {
+                    if o.intensity == v.intensity {
+                        VplChange::Same(j as u32)
+                    } else {
+                        VplChange::Reweighted(j as u32)
+                    }
+                }
+                _ => VplChange::Invalidated,
+            };
+            match change {
+                VplChange::Same(o) => {
+                    diff.reused += 1;
+                    diff.identity &= o as usize == i;
+                }
+                VplChange::Reweighted(_) => diff.reweighted += 1,
+                VplChange::Invalidated => diff.invalidated += 1,
+            }
+            diff.identity &= matches!(change, VplChange::Same(_));
+            diff.changes.push(change);
+        }
+        diff
+    }
+}
+
+/// The work one record's refresh did, by case.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Refresh {
+    pub vpl_rays: u64,
+    pub occlusion_box_tests: u64,
+    pub occlusion_rays: u64,
+    pub deocclusion_box_tests: u64,
+    pub deocclusion_rays: u64,
+    /// Contributions re-valued because their VPL changed intensity only.
+    pub reweighted: u64,
+    /// Contributions cases 3 and 4 changed.
+    pub occluded: u64,
+    pub deoccluded: u64,
+}
+
+impl std::ops::AddAssign for Refresh {
+    fn add_assign(&mut self, o: Refresh) {
+        self.vpl_rays += o.vpl_rays;
+        self.occlusion_box_tests += o.occlusion_box_tests;
+        self.occlusion_rays += o.occlusion_rays;
+        self.deocclusion_box_tests += o.deocclusion_box_tests;
+        self.deocclusion_rays += o.deocclusion_rays;
+        self.reweighted += o.reweighted;
+        self.occluded += o.occluded;
+        self.deoccluded += o.deoccluded;
+    }
+}
+
+/// What one tick changed, prepared for the per-ray tests.
+pub struct TickChanges {
+    pub vpls: VplDiff,
+    old_vpls: Vec<Vpl>,
+    /// The moved surfaces at their new placement (`None` if nothing moved).
+    moved_now: Option<CommittedScene>,
+    new_boxes: BoxTree,
+    old_boxes: BoxTree,
+    /// `moved_objects[object]`: the object moved this tick.
+    moved_objects: Vec<bool>,
+}
+
+fn widened(b: &Aabb, slack: f32) -> Aabb {
+    Aabb { min: b.min - Vec3::splat(slack), max: b.max + Vec3::splat(slack) }
+}
+
+impl TickChanges {
+    /// The changes between last tick's `old_vpls` and this tick's `vpls` after `delta`, or
+    /// `None` when no record can be affected.
+    pub fn new(
+        scene: &Scene,
+        accel: &SceneAccel,
+        delta: &SceneDelta,
+        old_vpls: Vec<Vpl>,
+        vpls: &[Vpl],
+        diagonal: f32,
+    ) -> Result<Option<TickChanges>, EmbreeError> {
+        let diff = VplDiff::between(&old_vpls, vpls);
+        if diff.identity && delta.moved.is_empty() {
+            return Ok(None);
+        }
+        let slack = BOX_SLACK * diagonal;
+        let moved_now = if delta.moved.is_empty() {
+            None
+        } else {
+            let surfaces: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
+            Some(accel.subset(scene, &surfaces)?)
+        };
+        let mut moved_objects = vec![false; scene.objects.len()];
+        for m in &delta.moved {
+            if let SurfaceId::Object(i) = m.surface {
+                moved_objects[i as usize] = true;
+            }
+        }
+        let boxes = |b: fn(&MovedSurface) -> &Aabb| delta.moved.iter().map(|m| widened(b(m), slack)).collect();
+        Ok(Some(TickChanges {
+            vpls: diff,
+            old_vpls,
+            moved_now,
+            new_boxes: BoxTree::new(boxes(|m| &m.new_bounds)),
+            old_boxes: BoxTree::new(boxes(|m| &m.old_bounds)),
+            moved_objects,
+        }))
+    }
+
+    /// Case 5: the record lies on an object that moved.
+    pub fn removes(&self, record: &Record) -> bool {
+        self.moved_objects.get(record.object as usize).copied().unwrap_or(true)
+    }
+
+    /// Re-evaluates what this tick invalidated in `record` (cases 1–4), leaving it as a fresh
+    /// computation with `vpls` would make it.
+    pub fn refresh(&self, accel: &SceneAccel, vpls: &[Vpl], record: &mut Record, min_distance: f32) -> Refresh {
+        let (p, n) = (record.position, record.normal);
+        let mut work = Refresh::default();
+        let contributions: Vec<u32> = vpls
+            .iter()
+            .zip(&self.vpls.changes)
+            .map(|(vpl, change)| {
+                let old = match *change {
+                    VplChange::Same(o) | VplChange::Reweighted(o) => o as usize,
+                    VplChange::Invalidated => return self.retrace(accel, vpl, p, n, min_distance, &mut work),
+                };
+                let before = record.contributions.get(old).copied().unwrap_or(0);
+                let Some((e, _, _)) = irradiance_from(vpl, p, n, min_distance) else { return 0 };
+                let visible_before = before != 0;
+                if !visible_before && matches!(change, VplChange::Reweighted(_)) {
+                    // Shadow and a contribution too small for RGBE look alike; only the latter
+                    // can become visible by a change of intensity.
+                    let was_tiny = irradiance_from(&self.old_vpls[old], p, n, min_distance)
+                        .is_some_and(|(e_old, _, _)| rgbe::pack(e_old) == 0);
+                    if was_tiny {
+                        return self.retrace(accel, vpl, p, n, min_distance, &mut work);
+                    }
+                }
+                let visible = self.still_visible(accel, vpl, p, n, visible_before, &mut work);
+                let now = if visible { rgbe::pack(e) } else { 0 };
+                work.reweighted += u64::from(now != before && visible_before && visible);
+                match (visible_before, visible) {
+                    (true, false) => work.occluded += 1,
+                    (false, true) => work.deoccluded += 1,
+                    _ => {}
+                }
+                now
+            })
+            .collect();
+        *record = Record::new(p, n, record.object, contributions, record.last_used);
+        work
+    }
+
+    /// Cases 1–2: the VPL changed; trace its visibility ray against the full scene.
+    fn retrace(&self, accel: &SceneAccel, vpl: &Vpl, p: Vec3, n: Vec3, min_distance: f32, work: &mut Refresh) -> u32 {
+        let (c, rays) = contribution(accel, vpl, p, n, min_distance);
+        work.vpl_rays += rays;
+        c
+    }
+
+    /// Cases 3–4 for a ray to an unchanged VPL that was `visible_before`.
+    fn still_visible(
+        &self,
+        accel: &SceneAccel,
+        vpl: &Vpl,
+        p: Vec3,
+        n: Vec3,
+        visible_before: bool,
+        work: &mut Refresh,
+    ) -> bool {
+        let Some(moved_now) = &self.moved_now else { return visible_before };
+        let ray = visibility_ray(p, n, vpl);
+        // Case 3: a moved surface now lies on the ray.
+        let (near_new, tests) = self.new_boxes.hits(ray.origin, ray.dir, ray.tfar);
+        work.occlusion_box_tests += tests;
+        if near_new {
+            work.occlusion_rays += 1;
+            if moved_now.occluded1(&ray) {
+                return false;
+            }
+        }
+        if visible_before {
+            return true;
+        }
+        // Case 4: the shadow may have come from a moved surface where it was.
+        let (near_old, tests) = self.old_boxes.hits(ray.origin, ray.dir, ray.tfar);
+        work.deocclusion_box_tests += tests;
+        if !near_old {
+            return false;
+        }
+        work.deocclusion_rays += 1;
+        !accel.scene().occluded1(&ray)
+    }
+}

@@ -1,0 +1,209 @@
+//! `relume bench icache`: `instant_cache`'s modes over the same animation, in one process, with
+//! the same seed and VPL set, as in Debattista et al.'s Tables 3 and 4.
+//!
+//! Runs `igi`, `static`, `temporal` (immediate re-evaluation) and `temporal` with on-demand
+//! re-evaluation, each in a fresh session over F frames. Frame 0 builds everything and is
+//! reported apart as `initial`; frames 1.. are summarised by median and p95. The indirect
+//! component is VPL shooting, invalidation and the cache (or IGI's gather and filter): what the
+//! paper's Table 4 times. `--audit` recomputes every record after each frame and reports the
+//! records that differ from a fresh computation (it should be 0; it slows the run down).
+use super::{progress_bar, quantile, AnimationRun, SceneArgs, UsageError};
+use crate::technique::instant_cache::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation};
+use crate::technique::{TechniqueConfig, TechniqueStats};
+use anyhow::Result;
+use serde::Serialize;
+use std::path::PathBuf;
+
+#[derive(clap::Args, Debug)]
+pub struct IcacheArgs {
+    #[command(flatten)]
+    pub target: SceneArgs,
+    /// Animation to play (NAME.anim.json).
+    #[arg(long)]
+    pub anim: PathBuf,
+    #[arg(long, default_value_t = 60)]
+    pub frames: u32,
+    /// Animation frames per second (time step between frames).
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
+    #[arg(long, default_value_t = 256)]
+    pub vpls: u32,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Check every record against a fresh computation after each frame (slow).
+    #[arg(long)]
+    pub audit: bool,
+    /// Also write the report as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct FrameFigures {
+    pub tick_ms: f64,
+    /// VPL shooting, invalidation and the indirect component.
+    pub indirect_ms: f64,
+    pub rays: u64,
+    pub visibility_rays: u64,
+    pub records: u64,
+    pub records_created: u64,
+    pub stats: InstantCacheStats,
+}
+
+#[derive(Debug, Serialize)]
+pub struct Summary {
+    pub tick_ms_median: f64,
+    pub tick_ms_p95: f64,
+    pub indirect_ms_median: f64,
+    pub indirect_ms_p95: f64,
+    pub rays_median: f64,
+    pub visibility_rays_median: f64,
+    pub records_median: f64,
+    pub records_created_median: f64,
+    pub memory_bytes: u64,
+    /// With `--audit`: records, over all frames, that differed from a fresh computation.
+    pub audit_mismatched: u64,
+    pub audit_off_surface: u64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct ModeReport {
+    pub mode: String,
+    pub initial: FrameFigures,
+    pub frames: Vec<FrameFigures>,
+    pub summary: Summary,
+}
+
+#[derive(Debug, Serialize)]
+pub struct IcacheReport {
+    pub scene: String,
+    pub animation: String,
+    pub vpls: u32,
+    pub width: u32,
+    pub height: u32,
+    pub threads: usize,
+    pub modes: Vec<ModeReport>,
+}
+
+/// The configurations compared, by label.
+fn configurations(args: &IcacheArgs) -> Vec<(&'static str, InstantCacheConfig)> {
+    let base = InstantCacheConfig { vpls: args.vpls, audit: args.audit, ..InstantCacheConfig::default() };
+    vec![
+        ("igi", InstantCacheConfig { mode: CacheMode::Igi, audit: false, ..base.clone() }),
+        ("static", InstantCacheConfig { mode: CacheMode::Static, ..base.clone() }),
+        ("temporal", InstantCacheConfig { mode: CacheMode::Temporal, ..base.clone() }),
+        (
+            "temporal-on-demand",
+            InstantCacheConfig { mode: CacheMode::Temporal, reevaluation: Reevaluation::OnDemand, ..base },
+        ),
+    ]
+}
+
+pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
+    if args.frames < 2 || !(args.fps > 0.0 && args.fps.is_finite()) {
+        return Err(UsageError("--frames must be at least 2 and --fps positive".into()).into());
+    }
+    let run = AnimationRun::load(&args.target, &args.anim)?;
+    let configs = configurations(args);
+    let bar = progress_bar(configs.len() as u64 * args.frames as u64, "frames")?;
+    let mut reports = Vec::new();
+    for (label, config) in configs {
+        bar.set_message(label);
+        let config = TechniqueConfig::InstantCache(config);
+        let mut figures = Vec::new();
+        run.play(&config, args.seed, args.frames, args.fps, |_, frame| {
+            let TechniqueStats::InstantCache(s) = &frame.stats.detail else {
+                anyhow::bail!("instant_cache stats expected");
+            };
+            figures.push(FrameFigures {
+                tick_ms: frame.stats.times.total_ms,
+                indirect_ms: s.vpl_ms + s.invalidate_ms + s.indirect_ms,
+                rays: frame.stats.rays.total(),
+                visibility_rays: s.visibility_rays,
+                records: s.records,
+                records_created: s.records_created,
+                stats: (**s).clone(),
+            });
+            bar.inc(1);
+            Ok(())
+        })?;
+        let initial = figures.remove(0);
+        let col = |f: &dyn Fn(&FrameFigures) -> f64| figures.iter().map(f).collect::<Vec<f64>>();
+        let (ticks, indirect) = (col(&|f| f.tick_ms), col(&|f| f.indirect_ms));
+        let last = figures.last().map(|f| &f.stats);
+        let summary = Summary {
+            tick_ms_median: quantile(&ticks, 0.5),
+            tick_ms_p95: quantile(&ticks, 0.95),
+            indirect_ms_median: quantile(&indirect, 0.5),
+            indirect_ms_p95: quantile(&indirect, 0.95),
+            rays_median: quantile(&col(&|f| f.rays as f64), 0.5),
+            visibility_rays_median: quantile(&col(&|f| f.visibility_rays as f64), 0.5),
+            records_median: quantile(&col(&|f| f.records as f64), 0.5),
+            records_created_median: quantile(&col(&|f| f.records_created as f64), 0.5),
+            memory_bytes: last.map_or(0, |s| s.vpl_bytes + s.cache_bytes),
+            audit_mismatched: figures.iter().map(|f| f.stats.audit_mismatched).sum(),
+            audit_off_surface: figures.iter().map(|f| f.stats.audit_off_surface).sum(),
+        };
+        reports.push(ModeReport { mode: label.to_string(), initial, frames: figures, summary });
+    }
+    bar.finish_and_clear();
+    Ok(IcacheReport {
+        scene: args.target.scene.display().to_string(),
+        animation: args.anim.display().to_string(),
+        vpls: args.vpls,
+        width: run.scene.camera.width,
+        height: run.scene.camera.height,
+        threads: run.threads,
+        modes: reports,
+    })
+}
+
+pub fn print_table(r: &IcacheReport, audit: bool) {
+    println!(
+        "relume bench icache: {} with {} at {}x{}, {} VPLs, {} threads",
+        r.scene, r.animation, r.width, r.height, r.vpls, r.threads
+    );
+    println!("  mode                tick ms (median, p95)   indirect ms (median, p95)   rays/tick   vis. rays   records  created  memory MiB");
+    for m in &r.modes {
+        let s = &m.summary;
+        println!(
+            "  {:<18} {:>10.1} {:>10.1} {:>14.1} {:>12.1} {:>11.0} {:>11.0} {:>9.0} {:>8.0} {:>11.1}",
+            m.mode,
+            s.tick_ms_median,
+            s.tick_ms_p95,
+            s.indirect_ms_median,
+            s.indirect_ms_p95,
+            s.rays_median,
+            s.visibility_rays_median,
+            s.records_median,
+            s.records_created_median,
+            s.memory_bytes as f64 / 1048576.0
+        );
+    }
+    let find = |name: &str| r.modes.iter().find(|m| m.mode == name).map(|m| &m.summary);
+    let (Some(igi), Some(stat)) = (find("igi"), find("static")) else { return };
+    for name in ["temporal", "temporal-on-demand"] {
+        let Some(t) = find(name) else { continue };
+        println!(
+            "  {name}: indirect {:.1}x faster than igi, {:.1}x faster than static; tick {:.1}x and {:.1}x",
+            igi.indirect_ms_median / t.indirect_ms_median.max(1e-9),
+            stat.indirect_ms_median / t.indirect_ms_median.max(1e-9),
+            igi.tick_ms_median / t.tick_ms_median.max(1e-9),
+            stat.tick_ms_median / t.tick_ms_median.max(1e-9)
+        );
+    }
+    if audit {
+        for m in &r.modes {
+            println!(
+                "  audit {}: {} records differed from a fresh computation, {} lay off every surface",
+                m.mode, m.summary.audit_mismatched, m.summary.audit_off_surface
+            );
+        }
+    }
+}
+
+pub fn run(args: IcacheArgs) -> Result<()> {
+    let report = measure(&args)?;
+    print_table(&report, args.audit);
+    super::write_json_report(args.json.as_deref(), &report)
+}
