@@ -72,10 +72,18 @@ pub fn compute_record(
     (Record::new(p, n, object, contributions, tick), rays)
 }
 
+/// What the octree keeps of a record: enough to weigh it without touching the record.
+#[derive(Clone, Copy, Debug)]
+struct Key {
+    index: u32,
+    position: Vec3,
+    normal: Vec3,
+}
+
 /// Records and the octree over them.
 pub struct Cache {
     pub records: Vec<Record>,
-    octree: Octree,
+    octree: Octree<Key>,
     /// The scene's bounding diagonal: the unit of the weight's distance.
     scale: f32,
     /// a, in units of `scale`.
@@ -86,7 +94,7 @@ impl Cache {
     /// An empty cache over the scene bounds `(lo, hi)` with caching radius `radius` (relative).
     pub fn new(lo: Vec3, hi: Vec3, radius: f32) -> Cache {
         let scale = (hi - lo).length().max(f32::MIN_POSITIVE);
-        let octree = Octree::new((lo + hi) * 0.5, (hi - lo).max_element() * 0.5, radius * scale);
+        let octree = Octree::new((lo + hi) * 0.5, (hi - lo).max_element() * 0.5, radius * scale / 2.0);
         Cache { records: Vec::new(), octree, scale, radius }
     }
 
@@ -102,7 +110,7 @@ impl Cache {
         if self.records.len() < before {
             self.octree.clear();
             for (i, r) in self.records.iter().enumerate() {
-                self.octree.insert(i as u32, r.position);
+                self.octree.insert(Key { index: i as u32, position: r.position, normal: r.normal }, r.position);
             }
         }
         (before - self.records.len()) as u64
@@ -110,37 +118,38 @@ impl Cache {
 
     pub fn insert(&mut self, record: Record) -> u32 {
         let index = self.records.len() as u32;
-        self.octree.insert(index, record.position);
+        self.octree.insert(Key { index, position: record.position, normal: record.normal }, record.position);
         self.records.push(record);
         index
     }
 
     /// Eq. 5's weight of `record` at `p` with unit normal `n`.
     /// Calls `f(index, w)` for every record with eq. 5's weight w > 1/a at `p` (unit normal
-    /// `n`). A record farther than a cannot qualify, so the square root waits for the distance test.
-    pub fn near(&self, p: Vec3, n: Vec3, mut f: impl FnMut(u32, f32)) {
+    /// `n`) until `f` returns false. A record farther than a cannot qualify, so the square root
+    /// waits for the distance test. Returns false if `f` stopped it.
+    fn visit(&self, p: Vec3, n: Vec3, mut f: impl FnMut(u32, f32) -> bool) -> bool {
         let reach = self.radius * self.scale;
-        self.octree.query(p, reach, |i| {
-            let record = &self.records[i as usize];
-            let d2 = (p - record.position).length_squared();
+        self.octree.query(p, reach, |key| {
+            let d2 = (p - key.position).length_squared();
             if d2 >= reach * reach {
-                return;
+                return true;
             }
-            let inverse = d2.sqrt() / self.scale + (1.0 - n.dot(record.normal)).max(0.0).sqrt();
-            if inverse < self.radius {
-                f(i, 1.0 / inverse.max(1e-12));
-            }
+            let inverse = d2.sqrt() / self.scale + (1.0 - n.dot(key.normal)).max(0.0).sqrt();
+            inverse >= self.radius || f(key.index, 1.0 / inverse.max(1e-12))
+        })
+    }
+
+    /// Calls `f(index, w)` for every record with w > 1/a at `p`.
+    pub fn near(&self, p: Vec3, n: Vec3, mut f: impl FnMut(u32, f32)) {
+        self.visit(p, n, |i, w| {
+            f(i, w);
+            true
         });
     }
 
-    /// Eq. 4's interpolated irradiance at `p`, or `None` where no record covers it.
-    pub fn irradiance(&self, p: Vec3, n: Vec3) -> Option<Rgb> {
-        let (mut sum, mut weights) = (Rgb::BLACK, 0.0f32);
-        self.near(p, n, |i, w| {
-            sum += self.records[i as usize].irradiance * w;
-            weights += w;
-        });
-        (weights > 0.0).then(|| sum / weights)
+    /// Does some record have w > 1/a at `p`? (Stops at the first.)
+    pub fn covers(&self, p: Vec3, n: Vec3) -> bool {
+        !self.visit(p, n, |_, _| false)
     }
 
     pub fn memory_bytes(&self) -> u64 {

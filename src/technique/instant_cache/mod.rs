@@ -181,58 +181,71 @@ impl InstantCache {
         if self.config.mode == CacheMode::Static {
             cache.clear();
         }
+        let (vpls, changes, tick) = (&self.vpls, self.changes.as_ref(), ctx.tick);
         // Coverage by records kept from earlier ticks does not depend on pixel order, so it is
         // found in parallel; the rest is decided in pixel order, which keeps the image
-        // independent of the thread count.
+        // independent of the thread count. Flagged records (on demand) must be known before
+        // interpolation, so then every covering record is marked, not just the first found.
         let first_new = cache.records.len();
-        let kept_used: Vec<AtomicBool> = (0..first_new).map(|_| AtomicBool::new(false)).collect();
+        let flagged_used = AtomicFlags::new(if changes.is_some() { first_new } else { 0 });
         let covered_by_kept: Vec<bool> = shaded
             .par_iter()
-            .map(|s| {
-                let Some(hit) = &s.sample.hit else { return true };
-                let mut covered = false;
-                cache.near(hit.p, hit.facing(), |i, _| {
-                    covered = true;
-                    kept_used[i as usize].store(true, Ordering::Relaxed);
-                });
-                covered
+            .map(|s| match &s.sample.hit {
+                None => true,
+                Some(hit) if changes.is_some() => {
+                    let mut covered = false;
+                    cache.near(hit.p, hit.facing(), |i, _| {
+                        covered = true;
+                        flagged_used.set(i);
+                    });
+                    covered
+                }
+                Some(hit) => cache.covers(hit.p, hit.facing()),
             })
             .collect();
-        let mut used: Vec<bool> = kept_used.into_iter().map(AtomicBool::into_inner).collect();
         for (s, _) in shaded.iter().zip(&covered_by_kept).filter(|(_, &covered)| !covered) {
             let Some(hit) = &s.sample.hit else { continue };
             let n = hit.facing();
-            let mut covered = false;
-            cache.near(hit.p, n, |i, _| {
-                covered = true;
-                used[i as usize] = true;
-            });
-            if !covered {
-                cache.insert(Record::new(hit.p, n, hit.object, Vec::new(), ctx.tick));
-                used.push(true);
+            if !cache.covers(hit.p, n) {
+                cache.insert(Record::new(hit.p, n, hit.object, Vec::new(), tick));
             }
         }
-        let (vpls, changes, tick) = (&self.vpls, self.changes.as_ref(), ctx.tick);
+        let flagged_used = flagged_used.into_vec();
         let works: Vec<(u64, Option<Refresh>)> = cache
             .records
             .par_iter_mut()
             .enumerate()
-            .filter(|(i, _)| used[*i])
+            .filter(|(i, r)| *i >= first_new || (r.stale && flagged_used.get(*i) == Some(&true)))
             .map(|(i, r)| {
-                r.last_used = tick;
                 if i >= first_new {
                     let (fresh, rays) =
                         cache::compute_record(ctx.accel, vpls, r.position, r.normal, r.object, min_distance, tick);
                     *r = fresh;
                     (rays, None)
-                } else if let (true, Some(changes)) = (r.stale, changes) {
-                    r.stale = false;
-                    (0, Some(changes.refresh(ctx.accel, vpls, r, min_distance)))
                 } else {
-                    (0, None)
+                    r.stale = false;
+                    (0, changes.map(|c| c.refresh(ctx.accel, vpls, r, min_distance)))
                 }
             })
             .collect();
+        let used = AtomicFlags::new(cache.records.len());
+        let indirect: Vec<Option<Rgb>> = shaded
+            .par_iter()
+            .map(|s| {
+                let h = s.sample.hit.as_ref()?;
+                let (mut sum, mut weights) = (Rgb::BLACK, 0.0f32);
+                cache.near(h.p, h.facing(), |i, w| {
+                    used.set(i);
+                    sum += cache.records[i as usize].irradiance * w;
+                    weights += w;
+                });
+                Some(if weights > 0.0 { sum / weights } else { Rgb::BLACK })
+            })
+            .collect();
+        let used = used.into_vec();
+        for (r, _) in cache.records.iter_mut().zip(&used).filter(|(_, &u)| u) {
+            r.last_used = tick;
+        }
         let stats = &mut self.pending;
         stats.records_created += (cache.records.len() - first_new) as u64;
         stats.records_reused += used[..first_new].iter().filter(|&&u| u).count() as u64;
@@ -244,11 +257,7 @@ impl InstantCache {
         }
         stats.records = cache.records.len() as u64;
         stats.cache_bytes = cache.memory_bytes();
-        let cache = &*cache;
-        shaded
-            .par_iter()
-            .map(|s| s.sample.hit.as_ref().map(|h| cache.irradiance(h.p, h.facing()).unwrap_or(Rgb::BLACK)))
-            .collect()
+        indirect
     }
 
     /// With `audit`: checks every record against a fresh computation (not timed as indirect).
@@ -286,6 +295,25 @@ impl InstantCache {
         let raw: Vec<Rgb> = gathered.into_iter().map(|g| g.0).collect();
         let filtered = igi::filter(&hits, &raw, width, n);
         hits.iter().zip(filtered).map(|(h, e)| h.map(|_| e)).collect()
+    }
+}
+
+/// One flag per record, set from many threads.
+struct AtomicFlags(Vec<AtomicBool>);
+
+impl AtomicFlags {
+    fn new(len: usize) -> AtomicFlags {
+        AtomicFlags((0..len).map(|_| AtomicBool::new(false)).collect())
+    }
+
+    fn set(&self, i: u32) {
+        if let Some(flag) = self.0.get(i as usize) {
+            flag.store(true, Ordering::Relaxed);
+        }
+    }
+
+    fn into_vec(self) -> Vec<bool> {
+        self.0.into_iter().map(AtomicBool::into_inner).collect()
     }
 }
 

@@ -1,32 +1,33 @@
 //! An octree over cache records for "which records lie within r of x" (Ward et al. 1988 keep
 //! their irradiance cache in one). A record lives in the deepest node that contains its
 //! position and is at least `2r` wide, so a query visits only nodes within r of x. Nodes split
-//! lazily; records are indices into the caller's list.
+//! lazily.
 use glam::Vec3;
 
 #[derive(Clone, Debug)]
-struct Node {
+struct Node<T> {
     centre: Vec3,
     half: f32,
     /// Indices of the eight children in `nodes`, once split.
     children: Option<[u32; 8]>,
-    items: Vec<u32>,
+    items: Vec<T>,
 }
 
 /// Deepest level below the root; a query's stack holds at most 7 per level plus one.
 const MAX_DEPTH: u32 = 32;
 const QUERY_STACK: usize = 7 * MAX_DEPTH as usize + 8;
 
+/// Items of type `T` (kept inline, so a query reads them without chasing indices) by position.
 #[derive(Clone, Debug)]
-pub struct Octree {
-    nodes: Vec<Node>,
+pub struct Octree<T> {
+    nodes: Vec<Node<T>>,
     /// Smallest node half-width: a record's influence radius.
     min_half: f32,
 }
 
-impl Octree {
+impl<T: Copy> Octree<T> {
     /// An empty octree over the cube of half-width `half` around `centre`, for query radius `r`.
-    pub fn new(centre: Vec3, half: f32, r: f32) -> Octree {
+    pub fn new(centre: Vec3, half: f32, r: f32) -> Octree<T> {
         let half = half.max(r);
         let root = Node { centre, half, children: None, items: Vec::new() };
         // At most MAX_DEPTH levels, so a query's stack stays within QUERY_STACK.
@@ -39,8 +40,8 @@ impl Octree {
         self.nodes[0].items.clear();
     }
 
-    /// Inserts record `item` at `p`. Points outside the root go to the root.
-    pub fn insert(&mut self, item: u32, p: Vec3) {
+    /// Inserts `item` at `p`. Points outside the root go to the root.
+    pub fn insert(&mut self, item: T, p: Vec3) {
         let mut at = 0usize;
         loop {
             let (centre, half) = (self.nodes[at].centre, self.nodes[at].half);
@@ -77,9 +78,9 @@ impl Octree {
         }
     }
 
-    /// Calls `f` with every record whose position may lie within `r` of `p` (a superset; the
-    /// caller tests the distance).
-    pub fn query(&self, p: Vec3, r: f32, mut f: impl FnMut(u32)) {
+    /// Calls `f` with every item whose position may lie within `r` of `p` (a superset; the
+    /// caller tests the distance) until `f` returns false. Returns false if it was stopped.
+    pub fn query(&self, p: Vec3, r: f32, mut f: impl FnMut(&T) -> bool) -> bool {
         let mut stack = [0u32; QUERY_STACK];
         let mut top = 1;
         while top > 0 {
@@ -90,16 +91,22 @@ impl Octree {
             if at != 0 && ((p - n.centre).abs() - Vec3::splat(n.half)).max(Vec3::ZERO).length() > r {
                 continue;
             }
-            n.items.iter().for_each(|&i| f(i));
+            if !n.items.iter().all(&mut f) {
+                return false;
+            }
             if let Some(c) = n.children {
                 stack[top..top + 8].copy_from_slice(&c);
                 top += 8;
             }
         }
+        true
     }
 
     pub fn memory_bytes(&self) -> u64 {
-        self.nodes.iter().map(|n| (std::mem::size_of::<Node>() + n.items.len() * 4) as u64).sum()
+        self.nodes
+            .iter()
+            .map(|n| (std::mem::size_of::<Node<T>>() + n.items.len() * std::mem::size_of::<T>()) as u64)
+            .sum()
     }
 }
 
@@ -118,15 +125,19 @@ mod tests {
             tree.insert(i as u32, *p);
         }
         let mut all = 0;
-        tree.query(Vec3::ZERO, 1e9, |_| all += 1);
+        tree.query(Vec3::ZERO, 1e9, |_: &u32| {
+            all += 1;
+            true
+        });
         assert_eq!(all, points.len(), "every record is reachable");
         for _ in 0..500 {
             let q = Vec3::new(v(), v(), v());
             let mut found: Vec<u32> = Vec::new();
-            tree.query(q, r, |i| {
+            tree.query(q, r, |&i| {
                 if (points[i as usize] - q).length() <= r {
                     found.push(i)
                 }
+                true
             });
             found.sort_unstable();
             let brute: Vec<u32> =
