@@ -56,13 +56,15 @@ fn far_from_the_origin_and_at_any_scale_the_cornell_box_renders_the_same() {
 }
 
 /// Every technique, small enough for many hard cases.
-fn techniques() -> [TechniqueConfig; 5] {
+fn techniques() -> [TechniqueConfig; 7] {
     [
         TechniqueConfig::Path(path(4)),
         TechniqueConfig::PhotonReuse(PhotonReuseConfig { paths: 20_000, ..PhotonReuseConfig::default() }),
         TechniqueConfig::Bdpt(relume::technique::bdpt::BdptConfig { spp: 2, ..Default::default() }),
         TechniqueConfig::from_spec("instant_cache:igi").unwrap(),
         TechniqueConfig::from_spec("instant_cache:static").unwrap(),
+        TechniqueConfig::from_spec("instant_cache:temporal").unwrap(),
+        TechniqueConfig::from_spec("particle_gi:particles=4000:gather_links=8").unwrap(),
     ]
 }
 

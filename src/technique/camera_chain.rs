@@ -20,6 +20,9 @@ pub struct DiffuseHit {
     /// Unit direction back along the arriving ray.
     pub wo: Vec3,
     pub object: u32,
+    /// The triangle hit and the barycentrics (u, v) of the hit on it.
+    pub triangle: u32,
+    pub uv: Vec2,
     /// Throughput of the specular chain (white when the camera sees the surface directly).
     pub beta: Rgb,
 }
@@ -73,7 +76,8 @@ pub fn trace(scene: &Scene, accel: &SceneAccel, index: usize, jitter: Vec2, rng:
         };
         let material = &scene.materials[scene.objects[object as usize].material as usize];
         if !material.is_specular() {
-            out.hit = Some(DiffuseHit { p: sp.p, n: sp.n, wo, object, beta });
+            out.hit =
+                Some(DiffuseHit { p: sp.p, n: sp.n, wo, object, triangle: prim, uv: Vec2::new(hit.u, hit.v), beta });
             break;
         }
         let Some(bs) = material.sample(sp.n, wo, rng.next_2d(), rng.next_f32()) else { break };

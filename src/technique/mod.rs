@@ -10,6 +10,7 @@ pub mod box_tree;
 pub mod camera_chain;
 pub mod instant_cache;
 pub mod nee;
+pub mod particle_gi;
 pub mod path;
 pub mod photon_reuse;
 mod spec;
@@ -78,10 +79,11 @@ pub enum TechniqueStats {
     PhotonReuse(Box<photon_reuse::PhotonStats>),
     Bdpt(Box<bdpt::BdptStats>),
     InstantCache(Box<instant_cache::InstantCacheStats>),
+    ParticleGi(Box<particle_gi::ParticleStats>),
 }
 
 /// The ids [`TechniqueConfig`] accepts.
-pub const TECHNIQUE_IDS: &[&str] = &["path", "photon_reuse", "bdpt", "instant_cache"];
+pub const TECHNIQUE_IDS: &[&str] = &["path", "photon_reuse", "bdpt", "instant_cache", "particle_gi"];
 
 impl TechniqueStats {
     /// Bytes the technique keeps resident between ticks (its light-transport state; the film
@@ -92,6 +94,7 @@ impl TechniqueStats {
             TechniqueStats::PhotonReuse(s) => s.memory.total() + s.grid_bytes,
             TechniqueStats::Bdpt(_) => 0,
             TechniqueStats::InstantCache(s) => s.vpl_bytes + s.cache_bytes,
+            TechniqueStats::ParticleGi(s) => s.memory_bytes(),
         }
     }
 }
@@ -104,6 +107,7 @@ pub enum TechniqueConfig {
     PhotonReuse(photon_reuse::PhotonReuseConfig),
     Bdpt(bdpt::BdptConfig),
     InstantCache(instant_cache::InstantCacheConfig),
+    ParticleGi(particle_gi::ParticleGiConfig),
 }
 
 impl TechniqueConfig {
@@ -113,6 +117,7 @@ impl TechniqueConfig {
             TechniqueConfig::PhotonReuse(_) => "photon_reuse",
             TechniqueConfig::Bdpt(_) => "bdpt",
             TechniqueConfig::InstantCache(_) => "instant_cache",
+            TechniqueConfig::ParticleGi(_) => "particle_gi",
         }
     }
 
@@ -123,16 +128,19 @@ impl TechniqueConfig {
             TechniqueConfig::PhotonReuse(c) => c.spp,
             TechniqueConfig::Bdpt(c) => c.spp,
             TechniqueConfig::InstantCache(c) => c.spp,
+            TechniqueConfig::ParticleGi(_) => 1,
         }
     }
 
-    /// Sets the camera samples per pixel each tick renders.
+    /// Sets the camera samples per pixel each tick renders (`particle_gi` renders one, plus
+    /// its adaptive supersampling, and ignores this).
     pub fn set_spp_per_tick(&mut self, spp: u32) {
         match self {
             TechniqueConfig::Path(c) => c.spp = spp,
             TechniqueConfig::PhotonReuse(c) => c.spp = spp,
             TechniqueConfig::Bdpt(c) => c.spp = spp,
             TechniqueConfig::InstantCache(c) => c.spp = spp,
+            TechniqueConfig::ParticleGi(_) => {}
         }
     }
 
@@ -143,13 +151,17 @@ impl TechniqueConfig {
             TechniqueConfig::PhotonReuse(c) => c.validate(),
             TechniqueConfig::Bdpt(c) => c.validate(),
             TechniqueConfig::InstantCache(c) => c.validate(),
+            TechniqueConfig::ParticleGi(c) => c.validate(),
         }
     }
 
     /// Resident photon paths the technique keeps (0 for techniques without any).
     pub fn photon_paths(&self) -> u32 {
         match self {
-            TechniqueConfig::Path(_) | TechniqueConfig::Bdpt(_) | TechniqueConfig::InstantCache(_) => 0,
+            TechniqueConfig::Path(_)
+            | TechniqueConfig::Bdpt(_)
+            | TechniqueConfig::InstantCache(_)
+            | TechniqueConfig::ParticleGi(_) => 0,
             TechniqueConfig::PhotonReuse(c) => c.paths,
         }
     }
@@ -179,5 +191,6 @@ pub fn build(config: &TechniqueConfig, scene: &Scene) -> Result<Box<dyn Techniqu
         TechniqueConfig::PhotonReuse(c) => Ok(Box::new(photon_reuse::PhotonReuse::new(c.clone(), scene)?)),
         TechniqueConfig::Bdpt(c) => Ok(Box::new(bdpt::Bdpt::new(c.clone(), scene)?)),
         TechniqueConfig::InstantCache(c) => Ok(Box::new(instant_cache::InstantCache::new(c.clone(), scene)?)),
+        TechniqueConfig::ParticleGi(c) => Ok(Box::new(particle_gi::ParticleGi::new(c.clone(), scene)?)),
     }
 }

@@ -68,8 +68,15 @@ impl TechniqueConfig {
             TechniqueConfig::Path(c) => format!("path:spp={}", c.spp),
             TechniqueConfig::InstantCache(c) => {
                 let mode = serde_json::to_value(c.mode).ok().and_then(|v| v.as_str().map(str::to_string));
-                format!("instant_cache:{}@{}", mode.unwrap_or_default(), c.vpls)
+                let on_demand = c.reevaluation == super::instant_cache::Reevaluation::OnDemand;
+                format!(
+                    "instant_cache:{}@{}{}",
+                    mode.unwrap_or_default(),
+                    c.vpls,
+                    if on_demand { ":reevaluation=on_demand" } else { "" }
+                )
             }
+            TechniqueConfig::ParticleGi(c) => format!("particle_gi:particles={}", c.particles),
             TechniqueConfig::Bdpt(c) => {
                 format!("bdpt:spp={}{}", c.spp, if c.permute { "" } else { ":permute=false" })
             }

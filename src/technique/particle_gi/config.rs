@@ -1,0 +1,158 @@
+//! `particle_gi`'s configuration (validated as the service receives it) and its per-tick
+//! figures, laid out like Chang et al.'s Tables 1 and 2. Lengths are fractions of the particle
+//! spacing √ΔA unless stated; times in milliseconds; memory in bytes.
+use crate::technique::TechniqueError;
+use serde::{Deserialize, Serialize};
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct ParticleGiConfig {
+    /// Area particles over all diffuse surfaces (both sides counted), unless `particle_area`.
+    pub particles: u32,
+    /// ΔA in m² per particle instead of a count (the count follows from the diffuse area).
+    pub particle_area: Option<f32>,
+    /// n_s of the scattering links (n_s × n_s per particle).
+    pub scatter_links: u32,
+    /// n_s of the gathering links.
+    pub gather_links: u32,
+    /// n_b, the single-link bounces after the first; `None` picks it from the scene's mean
+    /// reflectance ρ_S: the smallest n_b with ρ_S^(n_b + 2) below `admitted_truncation`.
+    pub bounces: Option<u32>,
+    pub admitted_truncation: f32,
+    /// Radius of the estimation lists, in particle spacings.
+    pub estimation_radius: f32,
+    /// Least cosine between an estimation list's particles and its radiance particle.
+    pub estimation_cosine: f32,
+    /// Longest subtriangle edge of the radiance-particle tessellation, in particle spacings.
+    pub subtriangle_edge: f32,
+    /// Samples per area light per particle in the emission step.
+    pub emission_samples: u32,
+    /// Update links incrementally when objects move (`false`: rebuild every link).
+    pub incremental: bool,
+    /// Adaptive supersampling: extra samples for pixels whose luminance differs from a
+    /// neighbour's by more than `supersample_contrast` (relative); 0 turns it off.
+    pub supersample: u32,
+    pub supersample_contrast: f32,
+    /// Seed of the particles, link directions and scattering walks (fixed across ticks).
+    pub seed: u64,
+}
+
+impl Default for ParticleGiConfig {
+    fn default() -> ParticleGiConfig {
+        ParticleGiConfig {
+            particles: 50_000,
+            particle_area: None,
+            scatter_links: 4,
+            gather_links: 16,
+            bounces: None,
+            admitted_truncation: 0.01,
+            estimation_radius: 2.0,
+            estimation_cosine: 0.9,
+            subtriangle_edge: 1.5,
+            emission_samples: 4,
+            incremental: true,
+            supersample: 0,
+            supersample_contrast: 0.1,
+            seed: 1,
+        }
+    }
+}
+
+/// Most area particles a scene may hold.
+pub const MAX_PARTICLES: u32 = 4_000_000;
+
+impl ParticleGiConfig {
+    pub fn validate(&self) -> Result<(), TechniqueError> {
+        let bad = |field: &str, message: &str| {
+            Err(TechniqueError::InvalidConfig { field: field.into(), message: message.into() })
+        };
+        if self.particles < 2 || self.particles > MAX_PARTICLES {
+            return bad("particles", &format!("must lie in 2..={MAX_PARTICLES}"));
+        }
+        if let Some(a) = self.particle_area {
+            if !(a.is_finite() && a > 0.0) {
+                return bad("particle_area", "must be a positive area in m²");
+            }
+        }
+        if !(1..=8).contains(&self.scatter_links) {
+            return bad("scatter_links", "must lie in 1..=8");
+        }
+        if !(1..=32).contains(&self.gather_links) {
+            return bad("gather_links", "must lie in 1..=32");
+        }
+        if self.bounces.is_some_and(|b| b > 64) {
+            return bad("bounces", "must be at most 64");
+        }
+        if !(self.admitted_truncation > 0.0 && self.admitted_truncation < 1.0) {
+            return bad("admitted_truncation", "must lie in (0, 1)");
+        }
+        if !(self.estimation_radius.is_finite() && self.estimation_radius > 0.0 && self.estimation_radius <= 64.0) {
+            return bad("estimation_radius", "must lie in (0, 64] particle spacings");
+        }
+        if !(self.estimation_cosine >= -1.0 && self.estimation_cosine <= 1.0) {
+            return bad("estimation_cosine", "must lie in [-1, 1]");
+        }
+        if !(self.subtriangle_edge.is_finite() && self.subtriangle_edge >= 0.1 && self.subtriangle_edge <= 1000.0) {
+            return bad("subtriangle_edge", "must lie in [0.1, 1000] particle spacings");
+        }
+        if !(1..=64).contains(&self.emission_samples) {
+            return bad("emission_samples", "must lie in 1..=64");
+        }
+        if self.supersample > 64 {
+            return bad("supersample", "must be at most 64");
+        }
+        if !(self.supersample_contrast.is_finite() && self.supersample_contrast > 0.0) {
+            return bad("supersample_contrast", "must be positive");
+        }
+        Ok(())
+    }
+}
+
+/// Per-tick figures of `particle_gi`.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ParticleStats {
+    pub area_particles: u64,
+    /// ΔA (m²) and the particle spacing √ΔA (m).
+    pub particle_area: f64,
+    pub radiance_particles: u64,
+    /// n_b used this tick.
+    pub bounces: u32,
+    /// Links in both sets, and those traced this tick (all of them when built, the ones that
+    /// may have changed when updated incrementally), with the box tests that chose them.
+    pub links_total: u64,
+    pub links_traced: u64,
+    pub link_box_tests: u64,
+    /// Radiance particles hit this tick, estimation lists built this tick and cached.
+    pub radiance_particles_needed: u64,
+    pub lists_built: u64,
+    pub lists_cached: u64,
+    /// Area particles gathered (those in the needed lists).
+    pub area_particles_gathered: u64,
+    /// Particles lit directly, and scattering deposits.
+    pub particles_lit: u64,
+    pub scatter_deposits: u64,
+    pub supersampled_pixels: u64,
+    pub camera_rays: u64,
+    pub specular_rays: u64,
+    pub shadow_rays: u64,
+    /// Visibility rays of the emission step.
+    pub emission_rays: u64,
+    pub geometry_ms: f64,
+    pub emission_ms: f64,
+    pub scattering_ms: f64,
+    pub preliminary_ms: f64,
+    pub gathering_ms: f64,
+    pub estimation_ms: f64,
+    pub final_ms: f64,
+    pub particle_bytes: u64,
+    pub scatter_link_bytes: u64,
+    pub gather_link_bytes: u64,
+    pub list_bytes: u64,
+    pub grid_bytes: u64,
+}
+
+impl ParticleStats {
+    pub fn memory_bytes(&self) -> u64 {
+        self.particle_bytes + self.scatter_link_bytes + self.gather_link_bytes + self.list_bytes + self.grid_bytes
+    }
+}

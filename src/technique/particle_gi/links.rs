@@ -1,0 +1,170 @@
+//! Particle links (Chang et al. §3.1): per area particle, n_s × n_s stratified cosine-weighted
+//! directions, each traced once and tied to the particle nearest its hit.
+//!
+//! Link k of particle i has the fixed direction of stratum k jittered by a stream seeded by
+//! (seed, set, i), in the frame of the particle's normal, so a link can be re-derived at any
+//! time and a retrace gives what a full rebuild would. A hit on a light, a miss, or a hit with
+//! no particle nearby ends nowhere ([`NOWHERE`]); a hit on a specular surface ends at
+//! [`NON_DIFFUSE`] (this method carries diffuse transport only). The end particle is the
+//! nearest one on the side of the hit object that the hit triangle turns towards the ray, never one on another object, so moving
+//! one object cannot change where a link to a static surface ends. Each link also keeps its hit
+//! distance, rounded up to 1/65 534 of the scene diagonal (u16::MAX: none), for the
+//! incremental update's box tests.
+use super::particles::{AreaParticles, ParticleGrid};
+use crate::core::frame::ShadingFrame;
+use crate::core::sampling::cosine_hemisphere;
+use crate::core::{offset_ray_origin, Rng};
+use crate::embree::Ray;
+use crate::scene::{Scene, SceneAccel, SurfaceId};
+use crate::technique::box_tree::BoxTree;
+use glam::{Vec2, Vec3};
+use rayon::prelude::*;
+
+/// The link ends at no particle.
+pub const NOWHERE: u32 = u32::MAX;
+/// The link ends on a specular surface.
+pub const NON_DIFFUSE: u32 = u32::MAX - 1;
+/// Shells of grid cells searched for a hit's nearest particle.
+const NEAREST_RINGS: i32 = 3;
+const NO_DISTANCE: u16 = u16::MAX;
+
+/// One set of links (scattering or gathering) for every particle.
+#[derive(Clone, Debug, Default)]
+pub struct LinkSet {
+    /// n_s: the set has n_s² links per particle.
+    pub n: u32,
+    /// Salt of the direction streams, different per set.
+    salt: u64,
+    /// End particle of link k of particle i at `i · n² + k`.
+    pub ends: Vec<u32>,
+    distance: Vec<u16>,
+    /// Metres per distance step.
+    step: f32,
+}
+
+/// What tracing a link found.
+struct Traced {
+    end: u32,
+    distance: u16,
+}
+
+impl LinkSet {
+    pub fn per_particle(&self) -> usize {
+        (self.n * self.n) as usize
+    }
+
+    pub fn len(&self) -> usize {
+        self.ends.len()
+    }
+
+    /// Builds every link of every particle. Returns the set and the rays traced.
+    pub fn build(
+        scene: &Scene,
+        accel: &SceneAccel,
+        particles: &AreaParticles,
+        grid: &ParticleGrid,
+        n: u32,
+        salt: u64,
+        diagonal: f32,
+    ) -> LinkSet {
+        let mut set = LinkSet { n, salt, ends: Vec::new(), distance: Vec::new(), step: diagonal / 65_534.0 };
+        let per = set.per_particle();
+        let traced: Vec<Traced> = (0..particles.len() * per)
+            .into_par_iter()
+            .map(|l| set.trace(scene, accel, particles, grid, l / per, l % per))
+            .collect();
+        set.ends = traced.iter().map(|t| t.end).collect();
+        set.distance = traced.iter().map(|t| t.distance).collect();
+        set
+    }
+
+    /// Unit world direction of link `k` of particle `i`.
+    pub fn direction(&self, particles: &AreaParticles, i: usize, k: usize) -> Vec3 {
+        let n = self.n as usize;
+        let mut rng = Rng::new(self.salt ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15), k as u64);
+        let j = rng.next_2d();
+        let u = Vec2::new(((k % n) as f32 + j.x) / n as f32, ((k / n) as f32 + j.y) / n as f32);
+        ShadingFrame::from_normal(particles.normal[i]).to_world(cosine_hemisphere(u))
+    }
+
+    fn ray(&self, particles: &AreaParticles, i: usize, k: usize) -> Ray {
+        Ray::new(offset_ray_origin(particles.position[i], particles.normal[i]), self.direction(particles, i, k))
+    }
+
+    fn trace(
+        &self,
+        scene: &Scene,
+        accel: &SceneAccel,
+        particles: &AreaParticles,
+        grid: &ParticleGrid,
+        i: usize,
+        k: usize,
+    ) -> Traced {
+        let ray = self.ray(particles, i, k);
+        let Some(hit) = accel.scene().intersect1(&ray) else { return Traced { end: NOWHERE, distance: NO_DISTANCE } };
+        let distance = ((hit.t / self.step).ceil() as u32 + 1).min(NO_DISTANCE as u32 - 1) as u16;
+        let end = match accel.resolve(&hit) {
+            Some((SurfaceId::Object(object), triangle)) => {
+                if scene.materials[scene.objects[object as usize].material as usize].is_specular() {
+                    NON_DIFFUSE
+                } else {
+                    // The side hit: the triangle's normal turned towards the ray's origin.
+                    let n = scene.surface_point(SurfaceId::Object(object), triangle, hit.u, hit.v).n;
+                    let facing = if n.dot(ray.dir) < 0.0 { n } else { -n };
+                    grid.nearest(particles, ray.at(hit.t), NEAREST_RINGS, |j| {
+                        particles.object[j] == object && particles.normal[j].dot(facing) > 0.0
+                    })
+                    .unwrap_or(NOWHERE)
+                }
+            }
+            _ => NOWHERE,
+        };
+        Traced { end, distance }
+    }
+
+    /// Retraces the links that may have changed after surfaces moved: those of particles on a
+    /// moved object (`moved[object]`), those ending on one, and those whose segment touches a
+    /// moved surface's old or new bounds (`boxes`). Returns the links retraced and box tests.
+    pub fn update(
+        &mut self,
+        scene: &Scene,
+        accel: &SceneAccel,
+        particles: &AreaParticles,
+        grid: &ParticleGrid,
+        moved: &[bool],
+        boxes: &BoxTree,
+    ) -> (u64, u64) {
+        let per = self.per_particle();
+        let on_moved = |i: u32| moved[particles.object[i as usize] as usize];
+        let this = &*self;
+        let checked: Vec<(usize, bool, u64)> = (0..self.ends.len())
+            .into_par_iter()
+            .map(|l| {
+                let (i, end) = (l / per, this.ends[l]);
+                if on_moved(i as u32) || (end < NON_DIFFUSE && on_moved(end)) {
+                    return (l, true, 0);
+                }
+                let ray = this.ray(particles, i, l % per);
+                let t = match this.distance[l] {
+                    NO_DISTANCE => f32::INFINITY,
+                    d => d as f32 * this.step,
+                };
+                let (touches, tests) = boxes.hits(ray.origin, ray.dir, t);
+                (l, touches, tests)
+            })
+            .collect();
+        let tests: u64 = checked.iter().map(|c| c.2).sum();
+        let stale: Vec<usize> = checked.iter().filter(|c| c.1).map(|c| c.0).collect();
+        let retraced: Vec<(usize, Traced)> =
+            stale.par_iter().map(|&l| (l, this.trace(scene, accel, particles, grid, l / per, l % per))).collect();
+        for (l, t) in &retraced {
+            self.ends[*l] = t.end;
+            self.distance[*l] = t.distance;
+        }
+        (retraced.len() as u64, tests)
+    }
+
+    pub fn memory_bytes(&self) -> u64 {
+        (self.ends.len() * 6) as u64
+    }
+}

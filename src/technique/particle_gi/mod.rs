@@ -1,0 +1,413 @@
+//! `particle_gi`: diffuse interreflection in two particle spaces.
+//!
+//! Paper: B. Chang, S. Park, I. Ihm, "Diffuse Global Illumination in Particle Spaces"
+//! (`shared/papers/diffuse-gi-in-particle-spaces.md`).
+//!
+//! # Algorithm
+//! 1. Geometry stage (§4.1; when geometry changes): area particles over the diffuse surfaces
+//!    (`particles.rs`, §3.1), n_s × n_s scattering and gathering links traced with Embree
+//!    (`links.rs`), and the implicit radiance particles of the tessellated triangles
+//!    (`radiance.rs`, §3.2). When objects move, only links that may have changed are retraced
+//!    (beyond the paper, which rebuilt all links in seconds): those of particles on a moved
+//!    object (carried by its transform, not resampled), those ending on one, and those whose
+//!    segment touches a moved surface's old or new bounds. Estimation lists near moved objects
+//!    are dropped.
+//! 2. Lighting stage (§4.2; when lights, materials or geometry change, `lighting.rs`):
+//!    emission to the particles, the first bounce through all scattering links, n_b more
+//!    bounces through one random link each, and L = ρ/π · φ/ΔA.
+//! 3. Ray-tracing stage (§4.3, every tick): camera samples through mirrors and glass to their
+//!    diffuse hits (the preliminary trace, which marks the radiance particles needed); lists
+//!    are built for needed radiance particles that have none; gathering through the 16 × 16
+//!    links for the area particles in those lists and radiance estimation (`gather.rs`); final
+//!    shading with direct light by shadow rays plus ρ/π times the indirect irradiance
+//!    interpolated over the hit's subtriangle. Optional adaptive supersampling re-samples
+//!    pixels that differ from a neighbour by more than a relative contrast.
+//!
+//! # Parameters (defaults)
+//! | field | default | meaning |
+//! |---|---|---|
+//! | `particles` | 50 000 | area particles (two per sampled point, one per side) |
+//! | `particle_area` | none | ΔA in m² instead of a count |
+//! | `scatter_links` / `gather_links` | 4 / 16 | n_s of each link set |
+//! | `bounces` | from ρ_S | n_b; by default the least with ρ_S^(n_b+2) < `admitted_truncation` (0.01) |
+//! | `estimation_radius` | 2 | R, in particle spacings √ΔA |
+//! | `estimation_cosine` | 0.9 | least normal cosine within a list |
+//! | `subtriangle_edge` | 1.5 | tessellation edge, in particle spacings |
+//! | `emission_samples` | 4 | samples per area light per particle |
+//! | `incremental` | true | update links incrementally (false: rebuild all when objects move) |
+//! | `supersample` | 0 | extra samples per aliased pixel (0: off); `supersample_contrast` 0.1 |
+//!
+//! # Bias
+//! Biased and consistent only in the limit of particle density and link count: flux is
+//! attributed to the nearest particle (light spreads by about a spacing), radiance is averaged
+//! over R (blurs corners, where the paper's Figure 7 shows the error), the walk after the
+//! first bounce is truncated at n_b + 1 bounces plus the gather, links carry diffuse transport
+//! only (no caustics; light reaching a mirror is lost), and emission to a particle close to a
+//! light uses its centre's distance. Direct light is exact (shadow rays).
+//!
+//! # Failure modes
+//! Thin features below the particle spacing get their neighbours' light; light leaks through
+//! walls thinner than R only if their sides' normals agree (they do not for a two-sided
+//! wall); a scene made mostly of mirrors gets no indirect light.
+mod config;
+mod gather;
+mod lighting;
+mod links;
+mod particles;
+mod radiance;
+
+pub use config::{ParticleGiConfig, ParticleStats, MAX_PARTICLES};
+
+use super::camera_chain::{self, CameraSample};
+use super::path::max_path_length;
+use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
+use crate::core::{Rgb, Rng};
+use crate::film::Film;
+use crate::scene::edits::{Aabb, SceneDelta};
+use crate::scene::{Scene, SurfaceId};
+use crate::technique::box_tree::BoxTree;
+use glam::Vec3;
+use lighting::FluxField;
+use links::LinkSet;
+use particles::{AreaParticles, ParticleGrid};
+use radiance::{EstimationLists, RadianceKey, Tessellation, Vertex};
+use rayon::prelude::*;
+use std::collections::HashMap;
+use std::f32::consts::FRAC_1_PI;
+use std::time::Instant;
+
+/// Salts of the two link sets' direction streams.
+const SCATTER_SALT: u64 = 0x5343_4154_5445_5200;
+const GATHER_SALT: u64 = 0x4741_5448_4552_0000;
+
+/// Everything the geometry stage builds.
+struct Geometry {
+    particles: AreaParticles,
+    grid: ParticleGrid,
+    scatter: LinkSet,
+    gather: LinkSet,
+    tessellation: Tessellation,
+    lists: EstimationLists,
+    /// √ΔA (m) and the scene diagonal at build time (m).
+    spacing: f32,
+}
+
+/// The `particle_gi` technique.
+pub struct ParticleGi {
+    config: ParticleGiConfig,
+    geometry: Option<Geometry>,
+    field: Option<FluxField>,
+    passes: u64,
+    pending: ParticleStats,
+}
+
+/// One camera sample with its direct light.
+struct Shaded {
+    pixel: usize,
+    sample: CameraSample,
+    direct: Rgb,
+    shadow: bool,
+}
+
+impl ParticleGi {
+    pub fn new(config: ParticleGiConfig, _scene: &Scene) -> Result<ParticleGi, TechniqueError> {
+        config.validate()?;
+        Ok(ParticleGi { config, geometry: None, field: None, passes: 0, pending: ParticleStats::default() })
+    }
+
+    fn bounces(&self, scene: &Scene) -> u32 {
+        self.config.bounces.unwrap_or_else(|| {
+            max_path_length(scene.mean_reflectance(), self.config.admitted_truncation).saturating_sub(2).clamp(1, 64)
+        })
+    }
+
+    /// Builds particles, links and the tessellation from scratch.
+    fn build_geometry(&mut self, ctx: &RenderContext) {
+        let c = &self.config;
+        let particles = AreaParticles::sample(ctx.scene, c.particles, c.particle_area, c.seed);
+        let spacing = particles.area.max(f32::MIN_POSITIVE).sqrt();
+        let grid = ParticleGrid::build(&particles, spacing);
+        let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
+        let scatter =
+            LinkSet::build(ctx.scene, ctx.accel, &particles, &grid, c.scatter_links, c.seed ^ SCATTER_SALT, diagonal);
+        let gather =
+            LinkSet::build(ctx.scene, ctx.accel, &particles, &grid, c.gather_links, c.seed ^ GATHER_SALT, diagonal);
+        let tessellation = Tessellation::build(ctx.scene, c.subtriangle_edge * spacing);
+        self.pending.links_traced += (scatter.len() + gather.len()) as u64;
+        self.geometry = Some(Geometry {
+            particles,
+            grid,
+            scatter,
+            gather,
+            tessellation,
+            lists: EstimationLists::default(),
+            spacing,
+        });
+    }
+
+    /// Carries the particles of moved objects and retraces the links that may have changed.
+    fn update_geometry(&mut self, ctx: &RenderContext, delta: &SceneDelta) {
+        let Some(g) = self.geometry.as_mut() else { return };
+        let mut moved = vec![false; ctx.scene.objects.len()];
+        for m in &delta.moved {
+            if let SurfaceId::Object(i) = m.surface {
+                moved[i as usize] = true;
+            }
+        }
+        let carried: Vec<usize> = (0..g.particles.len()).filter(|&i| moved[g.particles.object[i] as usize]).collect();
+        if let (Some(&first), Some(&last)) = (carried.first(), carried.last()) {
+            // Particles are grouped by object; re-place the span, which covers every carried one.
+            g.particles.place(ctx.scene, first..last + 1);
+        }
+        g.grid = ParticleGrid::build(&g.particles, g.spacing);
+        let slack = 1e-4 * g.spacing.max(1e-6) + 1e-5;
+        let boxes: Vec<Aabb> = delta
+            .moved
+            .iter()
+            .flat_map(|m| [m.old_bounds, m.new_bounds])
+            .map(|b| Aabb { min: b.min - Vec3::splat(slack), max: b.max + Vec3::splat(slack) })
+            .collect();
+        let tree = BoxTree::new(boxes.clone());
+        for set in [&mut g.scatter, &mut g.gather] {
+            let (traced, tests) = set.update(ctx.scene, ctx.accel, &g.particles, &g.grid, &moved, &tree);
+            self.pending.links_traced += traced;
+            self.pending.link_box_tests += tests;
+        }
+        g.lists.invalidate(&moved, &boxes, self.config.estimation_radius * g.spacing);
+    }
+
+    /// Camera samples `(pixel, sample)` with their direct light (the preliminary trace).
+    fn trace(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<Shaded> {
+        let scene = ctx.scene;
+        let shaded: Vec<Shaded> = samples
+            .par_iter()
+            .map(|&(pixel, sample)| {
+                let mut rng = Rng::for_sample(ctx.seed, ctx.tick, pixel as u64, sample);
+                let jitter = rng.next_2d();
+                let s = camera_chain::trace(scene, ctx.accel, pixel, jitter, &mut rng);
+                let (direct, shadow) = match &s.hit {
+                    Some(hit) => camera_chain::direct_light(scene, ctx.accel, hit, &mut rng),
+                    None => (Rgb::BLACK, false),
+                };
+                Shaded { pixel, sample: s, direct, shadow }
+            })
+            .collect();
+        self.pending.camera_rays += samples.len() as u64;
+        self.pending.specular_rays += shaded.iter().map(|s| s.sample.specular_rays).sum::<u64>();
+        self.pending.shadow_rays += shaded.iter().filter(|s| s.shadow).count() as u64;
+        shaded
+    }
+
+    /// Indirect irradiance at each shaded sample: lists for new radiance particles, gathering
+    /// and estimation for the needed ones, interpolation over each hit's subtriangle.
+    fn indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded]) -> Vec<Rgb> {
+        let (Some(g), Some(field)) = (self.geometry.as_mut(), self.field.as_ref()) else {
+            return vec![Rgb::BLACK; shaded.len()];
+        };
+        let t = Instant::now();
+        let corners: Vec<Option<[(RadianceKey, Vertex, f32); 3]>> = shaded
+            .iter()
+            .map(|s| {
+                let hit = s.sample.hit.as_ref()?;
+                let side = u8::from(hit.n.dot(hit.wo) < 0.0);
+                g.tessellation.corners(hit.object, hit.triangle, hit.uv, side)
+            })
+            .collect();
+        let mut needed: HashMap<RadianceKey, Vertex> = HashMap::new();
+        for c in corners.iter().flatten() {
+            for (k, v, _) in c {
+                needed.entry(*k).or_insert(*v);
+            }
+        }
+        let mut keys: Vec<RadianceKey> = needed.keys().copied().collect();
+        keys.sort_unstable();
+        self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
+
+        let t = Instant::now();
+        let missing: Vec<(RadianceKey, Vertex)> =
+            keys.iter().filter(|k| !g.lists.lists.contains_key(k)).map(|k| (*k, needed[k])).collect();
+        let (radius, cosine) = (self.config.estimation_radius * g.spacing, self.config.estimation_cosine);
+        let built: Vec<(RadianceKey, radiance::EstimationList)> = missing
+            .par_iter()
+            .map(|(k, v)| (*k, EstimationLists::build(ctx.scene, &g.particles, &g.grid, v, radius, cosine)))
+            .collect();
+        self.pending.lists_built += built.len() as u64;
+        g.lists.lists.extend(built);
+        self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
+
+        let t = Instant::now();
+        let wanted = gather::particles_to_gather(&g.lists, &keys, g.particles.len());
+        let gathered = gather::gather(&g.gather, field, &wanted, g.particles.len());
+        self.pending.area_particles_gathered += wanted.len() as u64;
+        self.pending.gathering_ms += t.elapsed().as_secs_f64() * 1e3;
+
+        let t = Instant::now();
+        let estimates = gather::estimate(&g.lists, &keys, &gathered, &g.particles.areas);
+        self.pending.radiance_particles_needed += keys.len() as u64;
+        self.pending.estimation_ms += t.elapsed().as_secs_f64() * 1e3;
+
+        corners
+            .iter()
+            .map(|c| {
+                let Some(c) = c else { return Rgb::BLACK };
+                let weights: f32 = c.iter().map(|x| x.2).sum();
+                let sum = c.iter().fold(Rgb::BLACK, |s, (k, _, w)| s + estimates[k] * *w);
+                if weights > 0.0 {
+                    sum / weights
+                } else {
+                    Rgb::BLACK
+                }
+            })
+            .collect()
+    }
+
+    /// Radiance of each shaded sample: emission, direct light, and ρ/π times the indirect
+    /// irradiance.
+    fn shade(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<(usize, Rgb)> {
+        let shaded = self.trace(ctx, samples);
+        let indirect = self.indirect(ctx, &shaded);
+        let t = Instant::now();
+        let out = shaded
+            .iter()
+            .zip(indirect)
+            .map(|(s, e)| {
+                let reflected = match &s.sample.hit {
+                    Some(hit) => hit.beta * hit.material(ctx.scene).diffuse_reflectance() * e * FRAC_1_PI,
+                    None => Rgb::BLACK,
+                };
+                (s.pixel, s.sample.emitted + s.direct + reflected)
+            })
+            .collect();
+        self.pending.final_ms += t.elapsed().as_secs_f64() * 1e3;
+        out
+    }
+
+    /// Pixels whose luminance differs from the right or lower neighbour's by more than the
+    /// relative contrast (the paper's aliased pixels).
+    fn aliased(&self, radiance: &[Rgb], width: usize) -> Vec<usize> {
+        let contrast = self.config.supersample_contrast;
+        let y: Vec<f32> = radiance.iter().map(|r| r.luminance()).collect();
+        let differs = |a: usize, b: usize| (y[a] - y[b]).abs() > contrast * y[a].max(y[b]).max(1e-6);
+        let mut marked = vec![false; y.len()];
+        for i in 0..y.len() {
+            for j in [i + 1, i + width] {
+                let same_row = j != i + 1 || (i + 1) % width != 0;
+                if j < y.len() && same_row && differs(i, j) {
+                    marked[i] = true;
+                    marked[j] = true;
+                }
+            }
+        }
+        (0..y.len()).filter(|&i| marked[i]).collect()
+    }
+}
+
+impl Technique for ParticleGi {
+    fn id(&self) -> &'static str {
+        "particle_gi"
+    }
+
+    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
+        self.pending = ParticleStats::default();
+        let t = Instant::now();
+        let toggled = delta
+            .materials
+            .iter()
+            .zip(&delta.previous_materials)
+            .any(|(&m, old)| ctx.scene.materials[m].is_specular() != old.is_specular());
+        let geometry_changed = !delta.moved.is_empty() || toggled;
+        if self.geometry.is_none() || toggled || (geometry_changed && !self.config.incremental) {
+            self.build_geometry(ctx);
+        } else if geometry_changed {
+            self.update_geometry(ctx, delta);
+        }
+        self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
+        if geometry_changed || !delta.lights.is_empty() || !delta.materials.is_empty() {
+            self.field = None;
+        }
+        if let (None, Some(g)) = (&self.field, &self.geometry) {
+            let t = Instant::now();
+            let (direct, rays) =
+                lighting::emit(ctx.scene, ctx.accel, &g.particles, self.config.emission_samples, self.config.seed);
+            self.pending.emission_ms = t.elapsed().as_secs_f64() * 1e3;
+            let t = Instant::now();
+            let field = lighting::scatter(
+                ctx.scene,
+                &g.particles,
+                &g.scatter,
+                direct,
+                self.bounces(ctx.scene),
+                self.config.seed,
+            );
+            self.pending.emission_rays = rays;
+            self.pending.scattering_ms = t.elapsed().as_secs_f64() * 1e3;
+            self.field = Some(field);
+        }
+        if !delta.is_empty() {
+            self.passes = 0;
+        }
+        Ok(())
+    }
+
+    fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
+        let scene = ctx.scene;
+        let width = scene.camera.width as usize;
+        let pixels = width * scene.camera.height as usize;
+        let pass = self.passes * (1 + self.config.supersample as u64);
+        let first: Vec<(usize, u64)> = (0..pixels).map(|i| (i, pass)).collect();
+        let mut shaded = self.shade(ctx, &first);
+        if self.config.supersample > 0 {
+            let radiance: Vec<Rgb> = shaded.iter().map(|s| s.1).collect();
+            let aliased = self.aliased(&radiance, width);
+            self.pending.supersampled_pixels = aliased.len() as u64;
+            let extra: Vec<(usize, u64)> = aliased
+                .iter()
+                .flat_map(|&i| (1..=self.config.supersample as u64).map(move |k| (i, pass + k)))
+                .collect();
+            shaded.extend(self.shade(ctx, &extra));
+        }
+        let mut sums = vec![(Rgb::BLACK, 0.0f64); pixels];
+        for (pixel, radiance) in shaded {
+            sums[pixel].0 += radiance;
+            sums[pixel].1 += 1.0;
+        }
+        film.accumulate_chunks(
+            width,
+            |first, chunk| {
+                for (k, px) in chunk.iter_mut().enumerate() {
+                    let (sum, count) = sums[first + k];
+                    // Supersampled pixels count once, as their mean.
+                    px.add(sum / count.max(1.0) as f32);
+                    px.count += 1.0;
+                }
+            },
+            |(), ()| (),
+        );
+        self.passes += 1;
+        film.passes += 1;
+        let mut stats = std::mem::take(&mut self.pending);
+        if let Some(g) = &self.geometry {
+            stats.area_particles = g.particles.len() as u64;
+            stats.particle_area = g.particles.area as f64;
+            stats.radiance_particles = g.tessellation.total;
+            stats.links_total = (g.scatter.len() + g.gather.len()) as u64;
+            stats.lists_cached = g.lists.lists.len() as u64;
+            stats.particle_bytes = g.particles.memory_bytes() + g.tessellation.memory_bytes();
+            stats.scatter_link_bytes = g.scatter.memory_bytes();
+            stats.gather_link_bytes = g.gather.memory_bytes();
+            stats.list_bytes = g.lists.memory_bytes();
+            stats.grid_bytes = g.grid.memory_bytes();
+        }
+        if let Some(f) = &self.field {
+            stats.particles_lit = f.lit;
+            stats.scatter_deposits = f.deposits;
+        }
+        stats.bounces = self.bounces(scene);
+        let rays = RayCounts {
+            primary: stats.camera_rays,
+            secondary: stats.specular_rays + stats.links_traced,
+            shadow: stats.shadow_rays + stats.emission_rays,
+        };
+        Ok(RenderStats { rays, detail: TechniqueStats::ParticleGi(Box::new(stats)) })
+    }
+}
