@@ -6,12 +6,13 @@
 //! - `relume bench rays SCENE.json [--json FILE]`
 //! - `relume bench reuse SCENE.json --anim NAME.anim.json --frames F [--paths N] [--json FILE]`
 //! - `relume bench icache SCENE.json --anim NAME.anim.json --frames F [--vpls N] [--audit] [--json FILE]`
+//! - `relume bench particles SCENE.json [--anim NAME.anim.json --frames F] [--particles N] [--json FILE]`
 //! - `relume bench error SCENE.json [--anim NAME.anim.json --frames F --every K] --techniques LIST [--ref-spp S] [--out DIR]`
 //! - `relume load --url URL --scene NAME --anim NAME.anim.json --sessions N --hz H --duration 60s`
 //!
 //! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
 use clap::{Parser, Subcommand};
-use relume::tools::{bench, bench_error, bench_icache, bench_reuse, load, render, serve};
+use relume::tools::{bench, bench_error, bench_icache, bench_particles, bench_reuse, load, render, serve};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -48,6 +49,8 @@ enum BenchCommand {
     Reuse(bench_reuse::ReuseArgs),
     /// Instant caching modes (igi, static, temporal immediate and on demand) over the same animation.
     Icache(bench_icache::IcacheArgs),
+    /// particle_gi's stages, its relight tick against a Whitted frame, incremental vs full link updates.
+    Particles(bench_particles::ParticlesArgs),
     /// Speed against error: technique configurations against converged `path` references,
     /// with CSV, JSON, a Markdown report and plots.
     Error(bench_error::ErrorArgs),
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
         Command::Bench { which: BenchCommand::Rays(args) } => bench::rays(args),
         Command::Bench { which: BenchCommand::Reuse(args) } => bench_reuse::run(args),
         Command::Bench { which: BenchCommand::Icache(args) } => bench_icache::run(args),
+        Command::Bench { which: BenchCommand::Particles(args) } => bench_particles::run(args),
         Command::Bench { which: BenchCommand::Error(args) } => bench_error::run(args),
     };
     match result {

@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod bench_error;
 pub mod bench_icache;
+pub mod bench_particles;
 pub mod bench_reuse;
 pub mod load;
 pub mod render;
@@ -105,6 +106,20 @@ impl AnimationRun {
         Ok(AnimationRun { scene, anim: animation, threads, pool, device })
     }
 
+    /// A fresh session of `config` on the run's scene.
+    pub fn session(
+        &self,
+        config: &crate::technique::TechniqueConfig,
+        seed: u64,
+    ) -> anyhow::Result<crate::engine::Session> {
+        Ok(crate::engine::Session::new(self.scene.clone(), config, seed, &self.device)?)
+    }
+
+    /// Runs `f` on the run's thread pool.
+    pub fn install<R: Send>(&self, f: impl FnOnce() -> R + Send) -> R {
+        self.pool.install(f)
+    }
+
     /// Plays `frames` frames at `fps` in a fresh session of `config`, handing each frame to
     /// `each` with its index.
     pub fn play(
@@ -115,8 +130,8 @@ impl AnimationRun {
         fps: f32,
         mut each: impl FnMut(u32, &crate::engine::Frame) -> anyhow::Result<()> + Send,
     ) -> anyhow::Result<()> {
-        let mut session = crate::engine::Session::new(self.scene.clone(), config, seed, &self.device)?;
-        self.pool.install(|| {
+        let mut session = self.session(config, seed)?;
+        self.install(|| {
             for i in 0..frames {
                 session.queue_edits(self.anim.edits_at(i as f32 / fps))?;
                 let frame = session.tick()?;

@@ -138,6 +138,8 @@ pub struct ParticleStats {
     /// Visibility rays of the emission step.
     pub emission_rays: u64,
     pub geometry_ms: f64,
+    /// Camera rays, specular chains and direct light: a Whitted frame's work.
+    pub trace_ms: f64,
     pub emission_ms: f64,
     pub scattering_ms: f64,
     pub preliminary_ms: f64,

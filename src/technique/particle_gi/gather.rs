@@ -11,7 +11,6 @@ use super::links::{LinkSet, NON_DIFFUSE};
 use super::radiance::{EstimationLists, RadianceKey};
 use crate::core::Rgb;
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::f32::consts::PI;
 
 /// Ẽ for each particle in `needed` (a dense array, zero elsewhere).
@@ -44,13 +43,9 @@ pub fn particles_to_gather(lists: &EstimationLists, keys: &[RadianceKey], partic
     (0..particles as u32).filter(|&i| wanted[i as usize]).collect()
 }
 
-/// Ē (W/m²) at each radiance particle of `keys`: Σ Ẽ_m ΔA_m / Σ ΔA_m over its list.
-pub fn estimate(
-    lists: &EstimationLists,
-    keys: &[RadianceKey],
-    gathered: &[Rgb],
-    areas: &[f32],
-) -> HashMap<RadianceKey, Rgb> {
+/// Ē (W/m²) at each radiance particle of `keys`, in the same order: Σ Ẽ_m ΔA_m / Σ ΔA_m over
+/// its list.
+pub fn estimate(lists: &EstimationLists, keys: &[RadianceKey], gathered: &[Rgb], areas: &[f32]) -> Vec<Rgb> {
     keys.par_iter()
         .map(|k| {
             let (flux, area) = lists.lists.get(k).map_or((Rgb::BLACK, 0.0), |l| {
@@ -58,7 +53,11 @@ pub fn estimate(
                     (f + gathered[i as usize] * areas[i as usize], a + areas[i as usize])
                 })
             });
-            (*k, if area > 0.0 { flux / area } else { Rgb::BLACK })
+            if area > 0.0 {
+                flux / area
+            } else {
+                Rgb::BLACK
+            }
         })
         .collect()
 }

@@ -25,7 +25,7 @@ pub const NOWHERE: u32 = u32::MAX;
 /// The link ends on a specular surface.
 pub const NON_DIFFUSE: u32 = u32::MAX - 1;
 /// Shells of grid cells searched for a hit's nearest particle.
-const NEAREST_RINGS: i32 = 3;
+const NEAREST_RINGS: i32 = 2;
 const NO_DISTANCE: u16 = u16::MAX;
 
 /// One set of links (scattering or gathering) for every particle.

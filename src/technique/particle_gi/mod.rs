@@ -72,9 +72,12 @@ use links::LinkSet;
 use particles::{AreaParticles, ParticleGrid};
 use radiance::{EstimationLists, RadianceKey, Tessellation, Vertex};
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::f32::consts::FRAC_1_PI;
 use std::time::Instant;
+
+/// Particle grid cells, in particle spacings: about eight points a cell, so most nearest-
+/// particle queries end in their own cell.
+const GRID_CELL: f32 = 2.0;
 
 /// Salts of the two link sets' direction streams.
 const SCATTER_SALT: u64 = 0x5343_4154_5445_5200;
@@ -126,7 +129,7 @@ impl ParticleGi {
         let c = &self.config;
         let particles = AreaParticles::sample(ctx.scene, c.particles, c.particle_area, c.seed);
         let spacing = particles.area.max(f32::MIN_POSITIVE).sqrt();
-        let grid = ParticleGrid::build(&particles, spacing);
+        let grid = ParticleGrid::build(&particles, GRID_CELL * spacing);
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
         let scatter =
             LinkSet::build(ctx.scene, ctx.accel, &particles, &grid, c.scatter_links, c.seed ^ SCATTER_SALT, diagonal);
@@ -159,7 +162,7 @@ impl ParticleGi {
             // Particles are grouped by object; re-place the span, which covers every carried one.
             g.particles.place(ctx.scene, first..last + 1);
         }
-        g.grid = ParticleGrid::build(&g.particles, g.spacing);
+        g.grid = ParticleGrid::build(&g.particles, GRID_CELL * g.spacing);
         let slack = 1e-4 * g.spacing.max(1e-6) + 1e-5;
         let boxes: Vec<Aabb> = delta
             .moved
@@ -178,6 +181,7 @@ impl ParticleGi {
 
     /// Camera samples `(pixel, sample)` with their direct light (the preliminary trace).
     fn trace(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<Shaded> {
+        let t = Instant::now();
         let scene = ctx.scene;
         let shaded: Vec<Shaded> = samples
             .par_iter()
@@ -195,6 +199,7 @@ impl ParticleGi {
         self.pending.camera_rays += samples.len() as u64;
         self.pending.specular_rays += shaded.iter().map(|s| s.sample.specular_rays).sum::<u64>();
         self.pending.shadow_rays += shaded.iter().filter(|s| s.shadow).count() as u64;
+        self.pending.trace_ms += t.elapsed().as_secs_f64() * 1e3;
         shaded
     }
 
@@ -205,27 +210,25 @@ impl ParticleGi {
             return vec![Rgb::BLACK; shaded.len()];
         };
         let t = Instant::now();
+        let tessellation = &g.tessellation;
         let corners: Vec<Option<[(RadianceKey, Vertex, f32); 3]>> = shaded
-            .iter()
+            .par_iter()
             .map(|s| {
                 let hit = s.sample.hit.as_ref()?;
                 let side = u8::from(hit.n.dot(hit.wo) < 0.0);
-                g.tessellation.corners(hit.object, hit.triangle, hit.uv, side)
+                tessellation.corners(hit.object, hit.triangle, hit.uv, side)
             })
             .collect();
-        let mut needed: HashMap<RadianceKey, Vertex> = HashMap::new();
-        for c in corners.iter().flatten() {
-            for (k, v, _) in c {
-                needed.entry(*k).or_insert(*v);
-            }
-        }
-        let mut keys: Vec<RadianceKey> = needed.keys().copied().collect();
-        keys.sort_unstable();
+        let mut needed: Vec<(RadianceKey, Vertex)> =
+            corners.par_iter().flatten().flat_map_iter(|c| c.iter().map(|(k, v, _)| (*k, *v))).collect();
+        needed.par_sort_unstable_by_key(|(k, _)| *k);
+        needed.dedup_by_key(|(k, _)| *k);
+        let keys: Vec<RadianceKey> = needed.iter().map(|(k, _)| *k).collect();
         self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
         let missing: Vec<(RadianceKey, Vertex)> =
-            keys.iter().filter(|k| !g.lists.lists.contains_key(k)).map(|k| (*k, needed[k])).collect();
+            needed.iter().filter(|(k, _)| !g.lists.lists.contains_key(k)).copied().collect();
         let (radius, cosine) = (self.config.estimation_radius * g.spacing, self.config.estimation_cosine);
         let built: Vec<(RadianceKey, radiance::EstimationList)> = missing
             .par_iter()
@@ -251,7 +254,8 @@ impl ParticleGi {
             .map(|c| {
                 let Some(c) = c else { return Rgb::BLACK };
                 let weights: f32 = c.iter().map(|x| x.2).sum();
-                let sum = c.iter().fold(Rgb::BLACK, |s, (k, _, w)| s + estimates[k] * *w);
+                let estimate = |k: &RadianceKey| keys.binary_search(k).map_or(Rgb::BLACK, |i| estimates[i]);
+                let sum = c.iter().fold(Rgb::BLACK, |s, (k, _, w)| s + estimate(k) * *w);
                 if weights > 0.0 {
                     sum / weights
                 } else {

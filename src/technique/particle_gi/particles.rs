@@ -94,7 +94,7 @@ impl AreaParticles {
             ..AreaParticles::default()
         };
         let object_area: f32 = object_triangle_areas(o).iter().sum::<f64>() as f32;
-        let grid = ParticleGrid::build(&local, (object_area / n as f32).sqrt().max(f32::MIN_POSITIVE));
+        let grid = ParticleGrid::build(&local, 2.0 * (object_area / n as f32).sqrt().max(f32::MIN_POSITIVE));
         let mut caught = vec![1u64; points.len()];
         let samples = stratified_points(o, n * AREA_SAMPLES, &mut rng);
         for &(t, b) in &samples {
@@ -247,7 +247,14 @@ impl ParticleGrid {
                         if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
                             continue;
                         }
-                        let s = slot([c[0] + dx, c[1] + dy, c[2] + dz], slots);
+                        // Skip cells farther than the best so far.
+                        let cell = [c[0] + dx, c[1] + dy, c[2] + dz];
+                        let lo = Vec3::new(cell[0] as f32, cell[1] as f32, cell[2] as f32) * self.cell;
+                        let gap = (lo - p).max(p - lo - Vec3::splat(self.cell)).max(Vec3::ZERO).length_squared();
+                        if best.is_some_and(|(d, _)| gap > d) {
+                            continue;
+                        }
+                        let s = slot(cell, slots);
                         for &i in &self.indices[self.starts[s] as usize..self.starts[s + 1] as usize] {
                             if !accept(i as usize) {
                                 continue;
@@ -260,11 +267,12 @@ impl ParticleGrid {
                     }
                 }
             }
-            // Everything within `ring` cells of p's cell has been seen.
-            if let Some((d, _)) = best {
-                if d.sqrt() <= ring as f32 * self.cell {
-                    break;
-                }
+            // Everything closer to p than the searched block's nearest face has been seen.
+            let lo = (Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) - Vec3::splat(ring as f32)) * self.cell;
+            let hi = lo + Vec3::splat((2 * ring + 1) as f32 * self.cell);
+            let seen = (p - lo).min(hi - p).min_element();
+            if best.is_some_and(|(d, _)| d <= seen * seen) {
+                break;
             }
         }
         best.map(|(_, i)| i)
