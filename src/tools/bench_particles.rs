@@ -87,7 +87,7 @@ fn relight_edit(run: &AnimationRun) -> Result<Edit> {
             .flat_map(|o| o.world_positions.iter())
             .fold((glam::Vec3::INFINITY, glam::Vec3::NEG_INFINITY), |(lo, hi), p| (lo.min(*p), hi.max(*p)));
         let step = 0.02 * (diagonal.1 - diagonal.0).length();
-        let mut transform = light.transform.clone();
+        let mut transform = light.transform;
         transform.translation[0] += step;
         return Ok(Edit::Light { name: light.name.clone(), transform: Some(transform), emitter: None });
     }

@@ -64,6 +64,7 @@ mod temporal;
 mod vpl;
 
 pub use config::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation, MAX_VPLS};
+pub use temporal::BOX_SLACK;
 
 use super::camera_chain::{self, CameraSample, DiffuseHit};
 use super::path::max_path_length;

@@ -93,6 +93,7 @@ struct Geometry {
     lists: EstimationLists,
     /// √ΔA (m) and the scene diagonal at build time (m).
     spacing: f32,
+    diagonal: f32,
 }
 
 /// The `particle_gi` technique.
@@ -145,6 +146,7 @@ impl ParticleGi {
             tessellation,
             lists: EstimationLists::default(),
             spacing,
+            diagonal,
         });
     }
 
@@ -163,7 +165,7 @@ impl ParticleGi {
             g.particles.place(ctx.scene, first..last + 1);
         }
         g.grid = ParticleGrid::build(&g.particles, GRID_CELL * g.spacing);
-        let slack = 1e-4 * g.spacing.max(1e-6) + 1e-5;
+        let slack = crate::technique::instant_cache::BOX_SLACK * g.diagonal;
         let boxes: Vec<Aabb> = delta
             .moved
             .iter()
@@ -320,7 +322,14 @@ impl Technique for ParticleGi {
             .zip(&delta.previous_materials)
             .any(|(&m, old)| ctx.scene.materials[m].is_specular() != old.is_specular());
         let geometry_changed = !delta.moved.is_empty() || toggled;
-        if self.geometry.is_none() || toggled || (geometry_changed && !self.config.incremental) {
+        // Particles and subtriangles follow rigid motion; a change of scale resamples them.
+        let rescaled = delta.moved.iter().any(|m| {
+            let size =
+                |a: &glam::Affine3A| a.matrix3.x_axis.length() + a.matrix3.y_axis.length() + a.matrix3.z_axis.length();
+            let (old, new) = (size(&m.old_world_from_object), size(&m.new_world_from_object));
+            (old - new).abs() > 1e-5 * old.max(new)
+        });
+        if self.geometry.is_none() || toggled || rescaled || (geometry_changed && !self.config.incremental) {
             self.build_geometry(ctx);
         } else if geometry_changed {
             self.update_geometry(ctx, delta);

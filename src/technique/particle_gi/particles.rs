@@ -50,7 +50,8 @@ impl AreaParticles {
         let diffuse: Vec<usize> = (0..scene.objects.len())
             .filter(|&i| !scene.materials[scene.objects[i].material as usize].is_specular())
             .collect();
-        let total: f64 = diffuse.iter().map(|&i| scene.objects[i].area as f64).sum();
+        let areas: Vec<f64> = diffuse.iter().map(|&i| scaled_area(scene, i)).collect();
+        let total: f64 = areas.iter().sum();
         let mut out = AreaParticles::default();
         if total <= 0.0 {
             return out;
@@ -61,7 +62,7 @@ impl AreaParticles {
         }
         .max(1.0);
         // Whole points per object by the largest-remainder rule, so counts add up exactly.
-        let shares: Vec<f64> = diffuse.iter().map(|&i| points_wanted * scene.objects[i].area as f64 / total).collect();
+        let shares: Vec<f64> = areas.iter().map(|a| points_wanted * a / total).collect();
         let mut points: Vec<u64> = shares.iter().map(|s| s.floor() as u64).collect();
         let mut order: Vec<usize> = (0..shares.len()).collect();
         order.sort_by(|&a, &b| {
@@ -73,15 +74,15 @@ impl AreaParticles {
         }
         let placed: u64 = points.iter().sum();
         out.area = (total / placed.max(1) as f64) as f32;
-        for (&object, &n) in diffuse.iter().zip(&points) {
-            out.sample_object(scene, object, n, seed);
+        for ((&object, &n), &area) in diffuse.iter().zip(&points).zip(&areas) {
+            out.sample_object(scene, object, n, area, seed);
         }
         out
     }
 
     /// `n` stratified points on `object`, picked by area along its triangles, with their cell
     /// areas.
-    fn sample_object(&mut self, scene: &Scene, object: usize, n: u64, seed: u64) {
+    fn sample_object(&mut self, scene: &Scene, object: usize, n: u64, world_area: f64, seed: u64) {
         let o = &scene.objects[object];
         let mut rng = Rng::new(seed ^ 0x5041_5254, object as u64); // "PART"
         let points = stratified_points(o, n, &mut rng);
@@ -104,7 +105,7 @@ impl AreaParticles {
         }
         let total: u64 = caught.iter().sum();
         for (&(triangle, b), &c) in points.iter().zip(&caught) {
-            let area = (c as f64 / total as f64 * o.area as f64) as f32;
+            let area = (c as f64 / total as f64 * world_area) as f32;
             for _side in 0..2 {
                 self.object.push(object as u32);
                 self.triangle.push(triangle);
@@ -140,6 +141,25 @@ impl AreaParticles {
     pub fn memory_bytes(&self) -> u64 {
         (self.len() * (4 + 4 + 8 + 12 + 12 + 4)) as u64
     }
+}
+
+/// An object's area with its scale applied but not its rotation or translation: its world area,
+/// computed so that it is bit for bit the same wherever the object has moved.
+fn scaled_area(scene: &Scene, object: usize) -> f64 {
+    let o = &scene.objects[object];
+    let scale = glam::Vec3::from(scene.desc().objects[object].transform.scale);
+    o.mesh
+        .triangles
+        .iter()
+        .map(|&[a, b, c]| {
+            let (a, b, c) = (
+                o.mesh.positions[a as usize] * scale,
+                o.mesh.positions[b as usize] * scale,
+                o.mesh.positions[c as usize] * scale,
+            );
+            0.5 * (b - a).cross(c - a).length() as f64
+        })
+        .sum()
 }
 
 /// Object-space triangle areas (independent of where the object is).
