@@ -94,6 +94,8 @@ struct Geometry {
     /// √ΔA (m) and the scene diagonal at build time (m).
     spacing: f32,
     diagonal: f32,
+    /// Each object's stable scale when the particles were sampled.
+    scales: Vec<Vec3>,
 }
 
 /// The `particle_gi` technique.
@@ -147,6 +149,7 @@ impl ParticleGi {
             lists: EstimationLists::default(),
             spacing,
             diagonal,
+            scales: (0..ctx.scene.objects.len()).map(|i| particles::stable_scale(ctx.scene, i)).collect(),
         });
     }
 
@@ -323,11 +326,8 @@ impl Technique for ParticleGi {
             .any(|(&m, old)| ctx.scene.materials[m].is_specular() != old.is_specular());
         let geometry_changed = !delta.moved.is_empty() || toggled;
         // Particles and subtriangles follow rigid motion; a change of scale resamples them.
-        let rescaled = delta.moved.iter().any(|m| {
-            let size =
-                |a: &glam::Affine3A| a.matrix3.x_axis.length() + a.matrix3.y_axis.length() + a.matrix3.z_axis.length();
-            let (old, new) = (size(&m.old_world_from_object), size(&m.new_world_from_object));
-            (old - new).abs() > 1e-5 * old.max(new)
+        let rescaled = self.geometry.as_ref().is_some_and(|g| {
+            (0..ctx.scene.objects.len()).any(|i| particles::stable_scale(ctx.scene, i) != g.scales[i])
         });
         if self.geometry.is_none() || toggled || rescaled || (geometry_changed && !self.config.incremental) {
             self.build_geometry(ctx);

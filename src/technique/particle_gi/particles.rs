@@ -143,11 +143,19 @@ impl AreaParticles {
     }
 }
 
-/// An object's area with its scale applied but not its rotation or translation: its world area,
-/// computed so that it is bit for bit the same wherever the object has moved.
+/// An object's scale with the low 8 mantissa bits cleared: animations that interpolate a
+/// constant scale as a·(1 − t) + b·t wobble in the last bits, which would otherwise make a
+/// moved object's areas and tessellation differ from a rebuild's.
+pub fn stable_scale(scene: &Scene, object: usize) -> Vec3 {
+    let s = scene.desc().objects[object].transform.scale;
+    Vec3::from(s.map(|x| f32::from_bits(x.to_bits() & !0xFF)))
+}
+
+/// An object's area with its (stable) scale applied but not its rotation or translation: its
+/// world area, computed so that it is bit for bit the same wherever the object has moved.
 fn scaled_area(scene: &Scene, object: usize) -> f64 {
     let o = &scene.objects[object];
-    let scale = glam::Vec3::from(scene.desc().objects[object].transform.scale);
+    let scale = stable_scale(scene, object);
     o.mesh
         .triangles
         .iter()
