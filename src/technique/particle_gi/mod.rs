@@ -224,8 +224,10 @@ impl ParticleGi {
                 tessellation.corners(hit.object, hit.triangle, hit.uv, side)
             })
             .collect();
-        let mut needed: Vec<(RadianceKey, Vertex)> =
-            corners.par_iter().flatten().flat_map_iter(|c| c.iter().map(|(k, v, _)| (*k, *v))).collect();
+        let mut needed: Vec<(RadianceKey, Vertex)> = Vec::with_capacity(3 * corners.len());
+        for c in corners.iter().flatten() {
+            needed.extend(c.iter().map(|(k, v, _)| (*k, *v)));
+        }
         needed.par_sort_unstable_by_key(|(k, _)| *k);
         needed.dedup_by_key(|(k, _)| *k);
         let keys: Vec<RadianceKey> = needed.iter().map(|(k, _)| *k).collect();
