@@ -11,42 +11,15 @@ use relume::technique::instant_cache::{CacheMode, InstantCacheConfig, InstantCac
 use relume::technique::{TechniqueConfig, TechniqueStats};
 use serde_json::json;
 
-/// Turns a quad's +Z normal to −Z (a back wall facing the camera).
-const FACE_BACK: [f32; 4] = [0.0, 1.0, 0.0, 0.0];
-/// Turn +Z to +X and to −X (side walls facing the room).
-const FACE_RIGHT: [f32; 4] = [0.0, std::f32::consts::FRAC_1_SQRT_2, 0.0, std::f32::consts::FRAC_1_SQRT_2];
-const FACE_LEFT: [f32; 4] = [0.0, -std::f32::consts::FRAC_1_SQRT_2, 0.0, std::f32::consts::FRAC_1_SQRT_2];
 const NO_ROTATION: [f32; 4] = [0.0, 0.0, 0.0, 1.0];
 const SLAB_SCALE: [f32; 3] = [0.4, 0.05, 0.4];
 const HOVERING: [f32; 3] = [0.0, 0.5, 0.8];
 /// Behind the camera, out of sight and out of the room.
 const AWAY: [f32; 3] = [0.0, 0.5, -8.0];
 
-/// A room open towards the camera, lit by a dynamic point light, with a dynamic slab at `slab`.
+/// The room seen from low down (a slab at 1.6 m is out of sight), the slab at `slab`.
 fn room(slab: [f32; 3]) -> Scene {
-    scene_from_json(json!({
-        "camera": {"position": [0, 0.3, -2.5], "look_at": [0, 0.3, 2], "vfov_deg": 40, "resolution": [24, 24]},
-        "materials": {
-            "white": {"type": "diffuse", "reflectance": [0.8, 0.8, 0.8]},
-            "red": {"type": "diffuse", "reflectance": [0.7, 0.2, 0.1]}
-        },
-        "objects": [
-            {"name": "floor", "shape": {"type": "quad"}, "material": "white",
-             "transform": {"rotation": FACE_UP, "scale": [2, 2, 1]}},
-            {"name": "wall", "shape": {"type": "quad"}, "material": "red",
-             "transform": {"translation": [0, 1.1, 2], "rotation": FACE_BACK, "scale": [2, 1.1, 1]}},
-            {"name": "ceiling", "shape": {"type": "quad"}, "material": "white",
-             "transform": {"translation": [0, 2.2, 0], "rotation": FACE_DOWN, "scale": [2, 2, 1]}},
-            {"name": "left", "shape": {"type": "quad"}, "material": "white",
-             "transform": {"translation": [-2, 1.1, 0], "rotation": FACE_RIGHT, "scale": [2, 1.1, 1]}},
-            {"name": "right", "shape": {"type": "quad"}, "material": "white",
-             "transform": {"translation": [2, 1.1, 0], "rotation": FACE_LEFT, "scale": [2, 1.1, 1]}},
-            {"name": "slab", "shape": {"type": "box"}, "material": "white", "dynamic": true,
-             "transform": {"translation": slab, "scale": SLAB_SCALE}}
-        ],
-        "lights": [{"name": "lamp", "dynamic": true, "emitter": {"type": "point", "intensity": [4, 4, 4]},
-                    "transform": {"translation": [0, 1.9, 0.5]}}]
-    }))
+    slab_room([0.0, 0.3, -2.5], [0.0, 0.3, 2.0], slab, SLAB_SCALE, [0.0, 1.9, 0.5])
 }
 
 fn move_slab(to: [f32; 3]) -> Edit {

@@ -8,7 +8,6 @@ use relume::scene::edits::Edit;
 use relume::scene::{Scene, Trs};
 use relume::technique::particle_gi::{ParticleGiConfig, ParticleStats};
 use relume::technique::{TechniqueConfig, TechniqueStats};
-use serde_json::json;
 
 fn stats(frame: &Frame) -> ParticleStats {
     match &frame.stats.detail {
@@ -71,27 +70,9 @@ fn the_cornell_box_approaches_the_path_reference_as_particles_grow() {
 
 const SLAB_SCALE: [f32; 3] = [0.3, 0.05, 0.3];
 
-/// A box room (open towards the camera) with a dynamic slab and a dynamic point light.
+/// The room seen from above, the slab hovering on the left.
 fn room() -> Scene {
-    scene_from_json(json!({
-        "camera": {"position": [0, 1, -2.5], "look_at": [0, 0.6, 1], "vfov_deg": 55, "resolution": [24, 24]},
-        "materials": {
-            "white": {"type": "diffuse", "reflectance": [0.8, 0.8, 0.8]},
-            "red": {"type": "diffuse", "reflectance": [0.7, 0.2, 0.1]}
-        },
-        "objects": [
-            {"name": "floor", "shape": {"type": "quad"}, "material": "white",
-             "transform": {"rotation": FACE_UP, "scale": [2, 2, 1]}},
-            {"name": "wall", "shape": {"type": "quad"}, "material": "red",
-             "transform": {"translation": [0, 1, 2], "rotation": [0, 1, 0, 0], "scale": [2, 1, 1]}},
-            {"name": "ceiling", "shape": {"type": "quad"}, "material": "white",
-             "transform": {"translation": [0, 2, 0], "rotation": FACE_DOWN, "scale": [2, 2, 1]}},
-            {"name": "slab", "shape": {"type": "box"}, "material": "white", "dynamic": true,
-             "transform": {"translation": [-0.5, 0.5, 0.5], "scale": SLAB_SCALE}}
-        ],
-        "lights": [{"name": "lamp", "dynamic": true, "emitter": {"type": "point", "intensity": [3, 3, 3]},
-                    "transform": {"translation": [0, 1.7, 0.3]}}]
-    }))
+    slab_room([0.0, 1.0, -2.5], [0.0, 0.6, 1.0], [-0.5, 0.5, 0.5], SLAB_SCALE, [0.0, 1.7, 0.3])
 }
 
 fn move_slab(x: f32) -> Edit {

@@ -153,3 +153,38 @@ pub fn assert_matches_reference(
         assert!((p - r).abs() < block_tolerance * r + block_floor, "{label}: block {i}: {p} vs {r}");
     }
 }
+
+/// Turns a quad's +Z normal to −Z (a back wall facing the camera), and to +X and −X.
+pub const FACE_BACK: [f32; 4] = [0.0, 1.0, 0.0, 0.0];
+pub const FACE_RIGHT: [f32; 4] = [0.0, std::f32::consts::FRAC_1_SQRT_2, 0.0, std::f32::consts::FRAC_1_SQRT_2];
+pub const FACE_LEFT: [f32; 4] = [0.0, -std::f32::consts::FRAC_1_SQRT_2, 0.0, std::f32::consts::FRAC_1_SQRT_2];
+
+/// A 4 m × 4 m room 2.2 m high, open towards −Z (white floor, ceiling and side walls, a red
+/// back wall at z = 2), lit by a dynamic point light "lamp" of intensity 4 W/sr at `lamp`, with
+/// a dynamic white box "slab" at `slab` scaled by `slab_scale`, seen from `camera` towards
+/// `look_at` at 24 × 24.
+pub fn slab_room(camera: [f32; 3], look_at: [f32; 3], slab: [f32; 3], slab_scale: [f32; 3], lamp: [f32; 3]) -> Scene {
+    scene_from_json(serde_json::json!({
+        "camera": {"position": camera, "look_at": look_at, "vfov_deg": 40, "resolution": [24, 24]},
+        "materials": {
+            "white": {"type": "diffuse", "reflectance": [0.8, 0.8, 0.8]},
+            "red": {"type": "diffuse", "reflectance": [0.7, 0.2, 0.1]}
+        },
+        "objects": [
+            {"name": "floor", "shape": {"type": "quad"}, "material": "white",
+             "transform": {"rotation": FACE_UP, "scale": [2, 2, 1]}},
+            {"name": "wall", "shape": {"type": "quad"}, "material": "red",
+             "transform": {"translation": [0, 1.1, 2], "rotation": FACE_BACK, "scale": [2, 1.1, 1]}},
+            {"name": "ceiling", "shape": {"type": "quad"}, "material": "white",
+             "transform": {"translation": [0, 2.2, 0], "rotation": FACE_DOWN, "scale": [2, 2, 1]}},
+            {"name": "left", "shape": {"type": "quad"}, "material": "white",
+             "transform": {"translation": [-2, 1.1, 0], "rotation": FACE_RIGHT, "scale": [2, 1.1, 1]}},
+            {"name": "right", "shape": {"type": "quad"}, "material": "white",
+             "transform": {"translation": [2, 1.1, 0], "rotation": FACE_LEFT, "scale": [2, 1.1, 1]}},
+            {"name": "slab", "shape": {"type": "box"}, "material": "white", "dynamic": true,
+             "transform": {"translation": slab, "scale": slab_scale}}
+        ],
+        "lights": [{"name": "lamp", "dynamic": true, "emitter": {"type": "point", "intensity": [4, 4, 4]},
+                    "transform": {"translation": lamp}}]
+    }))
+}
