@@ -7,6 +7,16 @@
 use crate::scene::edits::Aabb;
 use glam::{Vec3, Vec3A};
 
+/// Widening of moved boxes, as a fraction of the scene's bounding diagonal, so a ray that
+/// grazes a box in Embree's arithmetic (rays transformed into instance space) is never missed
+/// by the slab test's world-space arithmetic.
+pub const BOX_SLACK: f32 = 1e-4;
+
+/// `b` widened by `slack` on every side.
+pub fn widened(b: &Aabb, slack: f32) -> Aabb {
+    Aabb { min: b.min - Vec3::splat(slack), max: b.max + Vec3::splat(slack) }
+}
+
 /// A bounding-volume hierarchy over the moved boxes: a segment that misses a node's bounds
 /// skips all the boxes below it. Built by median split on the longest axis of the centroids.
 #[derive(Clone, Debug, Default)]

@@ -64,7 +64,6 @@ mod temporal;
 mod vpl;
 
 pub use config::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation, MAX_VPLS};
-pub use temporal::BOX_SLACK;
 
 use super::camera_chain::{self, CameraSample, DiffuseHit};
 use super::path::max_path_length;
@@ -264,7 +263,7 @@ impl InstantCache {
     /// With `audit`: checks every record against a fresh computation (not timed as indirect).
     fn audit(&mut self, ctx: &RenderContext) {
         let min_distance = self.min_distance(ctx);
-        let reach = 10.0 * temporal::BOX_SLACK * self.extent(ctx).diagonal;
+        let reach = 10.0 * super::box_tree::BOX_SLACK * self.extent(ctx).diagonal;
         let Some(cache) = &self.cache else { return };
         let audit = cache::audit(ctx.accel, cache, &self.vpls, min_distance, reach);
         self.pending.audit_records += audit.records;

@@ -32,11 +32,8 @@ use super::vpl::{irradiance_from, visibility_ray, Vpl};
 use crate::embree::{CommittedScene, EmbreeError};
 use crate::scene::edits::{Aabb, MovedSurface, SceneDelta};
 use crate::scene::{Scene, SceneAccel, SurfaceId};
-use crate::technique::box_tree::BoxTree;
+use crate::technique::box_tree::{widened, BoxTree, BOX_SLACK};
 use glam::Vec3;
-
-/// Widening of every moved box, as a fraction of the scene's bounding diagonal.
-pub const BOX_SLACK: f32 = 1e-4;
 
 /// How a VPL of this tick relates to last tick's VPL with the same key.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -132,10 +129,6 @@ pub struct TickChanges {
     old_boxes: BoxTree,
     /// `moved_objects[object]`: the object moved this tick.
     moved_objects: Vec<bool>,
-}
-
-fn widened(b: &Aabb, slack: f32) -> Aabb {
-    Aabb { min: b.min - Vec3::splat(slack), max: b.max + Vec3::splat(slack) }
 }
 
 impl TickChanges {

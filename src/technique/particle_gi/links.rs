@@ -15,6 +15,7 @@ use crate::core::frame::ShadingFrame;
 use crate::core::sampling::cosine_hemisphere;
 use crate::core::{offset_ray_origin, Rng};
 use crate::embree::Ray;
+use crate::scene::edits::Aabb;
 use crate::scene::{Scene, SceneAccel, SurfaceId};
 use crate::technique::box_tree::BoxTree;
 use glam::{Vec2, Vec3};
@@ -78,17 +79,18 @@ impl LinkSet {
         set
     }
 
-    /// Unit world direction of link `k` of particle `i`.
-    pub fn direction(&self, particles: &AreaParticles, i: usize, k: usize) -> Vec3 {
+    /// Unit world direction of link `k` of particle `i`, whose normal's frame is `frame`.
+    fn direction(&self, frame: &ShadingFrame, i: usize, k: usize) -> Vec3 {
         let n = self.n as usize;
         let mut rng = Rng::new(self.salt ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15), k as u64);
         let j = rng.next_2d();
         let u = Vec2::new(((k % n) as f32 + j.x) / n as f32, ((k / n) as f32 + j.y) / n as f32);
-        ShadingFrame::from_normal(particles.normal[i]).to_world(cosine_hemisphere(u))
+        frame.to_world(cosine_hemisphere(u))
     }
 
     fn ray(&self, particles: &AreaParticles, i: usize, k: usize) -> Ray {
-        Ray::new(offset_ray_origin(particles.position[i], particles.normal[i]), self.direction(particles, i, k))
+        let frame = ShadingFrame::from_normal(particles.normal[i]);
+        Ray::new(offset_ray_origin(particles.position[i], particles.normal[i]), self.direction(&frame, i, k))
     }
 
     fn trace(
@@ -124,7 +126,9 @@ impl LinkSet {
 
     /// Retraces the links that may have changed after surfaces moved: those of particles on a
     /// moved object (`moved[object]`), those ending on one, and those whose segment touches a
-    /// moved surface's old or new bounds (`boxes`). Returns the links retraced and box tests.
+    /// moved surface's old or new bounds (`boxes`, also as `tree`). A particle with every box
+    /// behind its tangent plane is skipped whole: its links leave into its hemisphere. Returns
+    /// the links retraced and box tests.
     pub fn update(
         &mut self,
         scene: &Scene,
@@ -132,29 +136,52 @@ impl LinkSet {
         particles: &AreaParticles,
         grid: &ParticleGrid,
         moved: &[bool],
-        boxes: &BoxTree,
+        boxes: &[Aabb],
+        tree: &BoxTree,
     ) -> (u64, u64) {
         let per = self.per_particle();
         let on_moved = |i: u32| moved[particles.object[i as usize] as usize];
         let this = &*self;
-        let checked: Vec<(usize, bool, u64)> = (0..self.ends.len())
+        // Per particle: its frame once, then each link's segment against the boxes.
+        let checked: Vec<(Vec<usize>, u64)> = (0..particles.len())
             .into_par_iter()
-            .map(|l| {
-                let (i, end) = (l / per, this.ends[l]);
-                if on_moved(i as u32) || (end < NON_DIFFUSE && on_moved(end)) {
-                    return (l, true, 0);
+            .map(|i| {
+                let links = i * per..(i + 1) * per;
+                if on_moved(i as u32) {
+                    return (links.collect(), 0);
                 }
-                let ray = this.ray(particles, i, l % per);
-                let t = match this.distance[l] {
-                    NO_DISTANCE => f32::INFINITY,
-                    d => d as f32 * this.step,
+                let (p, n) = (particles.position[i], particles.normal[i]);
+                let origin = offset_ray_origin(p, n);
+                let in_front = |b: &Aabb| {
+                    let (centre, half) = ((b.min + b.max) * 0.5, (b.max - b.min) * 0.5);
+                    n.dot(centre - p) + n.abs().dot(half) >= 0.0
                 };
-                let (touches, tests) = boxes.hits(ray.origin, ray.dir, t);
-                (l, touches, tests)
+                if !boxes.iter().any(in_front) {
+                    return (Vec::new(), boxes.len() as u64);
+                }
+                let frame = ShadingFrame::from_normal(n);
+                let (mut stale, mut tests) = (Vec::new(), 0u64);
+                for l in links {
+                    let end = this.ends[l];
+                    if end < NON_DIFFUSE && on_moved(end) {
+                        stale.push(l);
+                        continue;
+                    }
+                    let t = match this.distance[l] {
+                        NO_DISTANCE => f32::INFINITY,
+                        d => d as f32 * this.step,
+                    };
+                    let (touches, count) = tree.hits(origin, this.direction(&frame, i, l % per), t);
+                    tests += count;
+                    if touches {
+                        stale.push(l);
+                    }
+                }
+                (stale, tests)
             })
             .collect();
-        let tests: u64 = checked.iter().map(|c| c.2).sum();
-        let stale: Vec<usize> = checked.iter().filter(|c| c.1).map(|c| c.0).collect();
+        let tests: u64 = checked.iter().map(|c| c.1).sum();
+        let stale: Vec<usize> = checked.into_iter().flat_map(|c| c.0).collect();
         let retraced: Vec<(usize, Traced)> =
             stale.par_iter().map(|&l| (l, this.trace(scene, accel, particles, grid, l / per, l % per))).collect();
         for (l, t) in &retraced {

@@ -65,7 +65,7 @@ use crate::core::{Rgb, Rng};
 use crate::film::Film;
 use crate::scene::edits::{Aabb, SceneDelta};
 use crate::scene::{Scene, SurfaceId};
-use crate::technique::box_tree::BoxTree;
+use crate::technique::box_tree::{widened, BoxTree, BOX_SLACK};
 use glam::Vec3;
 use lighting::FluxField;
 use links::LinkSet;
@@ -168,16 +168,12 @@ impl ParticleGi {
             g.particles.place(ctx.scene, first..last + 1);
         }
         g.grid = ParticleGrid::build(&g.particles, GRID_CELL * g.spacing);
-        let slack = crate::technique::instant_cache::BOX_SLACK * g.diagonal;
-        let boxes: Vec<Aabb> = delta
-            .moved
-            .iter()
-            .flat_map(|m| [m.old_bounds, m.new_bounds])
-            .map(|b| Aabb { min: b.min - Vec3::splat(slack), max: b.max + Vec3::splat(slack) })
-            .collect();
+        let slack = BOX_SLACK * g.diagonal;
+        let boxes: Vec<Aabb> =
+            delta.moved.iter().flat_map(|m| [m.old_bounds, m.new_bounds]).map(|b| widened(&b, slack)).collect();
         let tree = BoxTree::new(boxes.clone());
         for set in [&mut g.scatter, &mut g.gather] {
-            let (traced, tests) = set.update(ctx.scene, ctx.accel, &g.particles, &g.grid, &moved, &tree);
+            let (traced, tests) = set.update(ctx.scene, ctx.accel, &g.particles, &g.grid, &moved, &boxes, &tree);
             self.pending.links_traced += traced;
             self.pending.link_box_tests += tests;
         }
