@@ -148,3 +148,26 @@ fn a_moving_light_does_no_geometry_work() {
         assert!(after.image != before.image);
     });
 }
+
+#[test]
+fn adaptive_supersampling_resamples_only_contrasted_pixels() {
+    // Properties: pixels that see another object than a neighbour, or whose noise-free
+    // radiance differs from it by more than the contrast, get `supersample` extra camera
+    // samples each (and only they): none in the furnace (one object, uniform light), some on
+    // the Cornell box's edges, whose image still matches the `path` reference.
+    let c = ParticleGiConfig { supersample: 4, supersample_contrast: 0.3, bounces: Some(30), ..config(6000) };
+    let mut furnace = load("furnace.json");
+    furnace.set_resolution(16, 16);
+    let uniform = stats(&render(furnace, TechniqueConfig::ParticleGi(c), 2, 1, 2));
+    assert_eq!((uniform.supersampled_pixels, uniform.camera_rays), (0, 16 * 16), "{uniform:?}");
+    let mut scene = load("cornell-box.json");
+    scene.set_resolution(32, 32);
+    let reference = render(scene.clone(), TechniqueConfig::Path(path(512)), 3, 1, 2).image;
+    let c = ParticleGiConfig { supersample: 4, supersample_contrast: 0.3, ..config(20_000) };
+    let frame = render(scene, TechniqueConfig::ParticleGi(c), 5, 16, 2);
+    let st = stats(&frame);
+    eprintln!("supersampling: {} pixels, {} camera rays", st.supersampled_pixels, st.camera_rays);
+    assert!(st.supersampled_pixels > 0 && st.supersampled_pixels < 32 * 32, "{st:?}");
+    assert_eq!(st.camera_rays, 32 * 32 + 4 * st.supersampled_pixels);
+    assert_matches_reference("particle_gi supersampled", &frame.image, &reference, 0.03, 0.10, 0.003);
+}

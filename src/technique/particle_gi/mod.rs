@@ -107,6 +107,15 @@ pub struct ParticleGi {
     pending: ParticleStats,
 }
 
+/// One shaded camera sample.
+struct Sampled {
+    pixel: usize,
+    radiance: Rgb,
+    /// `radiance` without the sampled direct light.
+    steady: Rgb,
+    object: Option<u32>,
+}
+
 /// One camera sample with its direct light.
 struct Shaded {
     pixel: usize,
@@ -268,9 +277,9 @@ impl ParticleGi {
             .collect()
     }
 
-    /// Radiance of each shaded sample: emission, direct light, and ρ/π times the indirect
-    /// irradiance.
-    fn shade(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<(usize, Rgb)> {
+    /// Each shaded sample's pixel, radiance (emission, direct light, and ρ/π times the indirect
+    /// irradiance) and its noise-free part (without the sampled direct light), with the object hit.
+    fn shade(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<Sampled> {
         let shaded = self.trace(ctx, samples);
         let indirect = self.indirect(ctx, &shaded);
         let t = Instant::now();
@@ -282,19 +291,23 @@ impl ParticleGi {
                     Some(hit) => hit.beta * hit.material(ctx.scene).diffuse_reflectance() * e * FRAC_1_PI,
                     None => Rgb::BLACK,
                 };
-                (s.pixel, s.sample.emitted + s.direct + reflected)
+                let steady = s.sample.emitted + reflected;
+                Sampled { pixel: s.pixel, radiance: steady + s.direct, steady, object: s.sample.hit.map(|h| h.object) }
             })
             .collect();
         self.pending.final_ms += t.elapsed().as_secs_f64() * 1e3;
         out
     }
 
-    /// Pixels whose luminance differs from the right or lower neighbour's by more than the
-    /// relative contrast (the paper's aliased pixels).
-    fn aliased(&self, radiance: &[Rgb], width: usize) -> Vec<usize> {
+    /// Pixels that differ from the right or lower neighbour (the paper's aliased pixels): they
+    /// see another object, or their noise-free radiance differs by more than the relative
+    /// contrast. The sampled direct light is left out, or its noise would mark most pixels.
+    fn aliased(&self, first: &[Sampled], width: usize) -> Vec<usize> {
         let contrast = self.config.supersample_contrast;
-        let y: Vec<f32> = radiance.iter().map(|r| r.luminance()).collect();
-        let differs = |a: usize, b: usize| (y[a] - y[b]).abs() > contrast * y[a].max(y[b]).max(1e-6);
+        let y: Vec<f32> = first.iter().map(|s| s.steady.luminance()).collect();
+        let differs = |a: usize, b: usize| {
+            first[a].object != first[b].object || (y[a] - y[b]).abs() > contrast * y[a].max(y[b]).max(1e-6)
+        };
         let mut marked = vec![false; y.len()];
         for i in 0..y.len() {
             for j in [i + 1, i + width] {
@@ -368,8 +381,7 @@ impl Technique for ParticleGi {
         let first: Vec<(usize, u64)> = (0..pixels).map(|i| (i, pass)).collect();
         let mut shaded = self.shade(ctx, &first);
         if self.config.supersample > 0 {
-            let radiance: Vec<Rgb> = shaded.iter().map(|s| s.1).collect();
-            let aliased = self.aliased(&radiance, width);
+            let aliased = self.aliased(&shaded, width);
             self.pending.supersampled_pixels = aliased.len() as u64;
             let extra: Vec<(usize, u64)> = aliased
                 .iter()
@@ -378,9 +390,9 @@ impl Technique for ParticleGi {
             shaded.extend(self.shade(ctx, &extra));
         }
         let mut sums = vec![(Rgb::BLACK, 0.0f64); pixels];
-        for (pixel, radiance) in shaded {
-            sums[pixel].0 += radiance;
-            sums[pixel].1 += 1.0;
+        for s in shaded {
+            sums[s.pixel].0 += s.radiance;
+            sums[s.pixel].1 += 1.0;
         }
         film.accumulate_chunks(
             width,
