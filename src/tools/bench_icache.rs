@@ -7,35 +7,21 @@
 //! component is VPL shooting, invalidation and the cache (or IGI's gather and filter): what the
 //! paper's Table 4 times. `--audit` recomputes every record after each frame and reports the
 //! records that differ from a fresh computation (it should be 0; it slows the run down).
-use super::{progress_bar, quantile, AnimationRun, SceneArgs, UsageError};
+use super::{progress_bar, quantile, AnimationArgs};
 use crate::technique::instant_cache::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation};
 use crate::technique::{TechniqueConfig, TechniqueStats};
 use anyhow::Result;
 use serde::Serialize;
-use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct IcacheArgs {
     #[command(flatten)]
-    pub target: SceneArgs,
-    /// Animation to play (NAME.anim.json).
-    #[arg(long)]
-    pub anim: PathBuf,
-    #[arg(long, default_value_t = 60)]
-    pub frames: u32,
-    /// Animation frames per second (time step between frames).
-    #[arg(long, default_value_t = 30.0)]
-    pub fps: f32,
+    pub run: AnimationArgs,
     #[arg(long, default_value_t = 256)]
     pub vpls: u32,
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
     /// Check every record against a fresh computation after each frame (slow).
     #[arg(long)]
     pub audit: bool,
-    /// Also write the report as JSON.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
 }
 
 #[derive(Debug, Serialize)]
@@ -100,18 +86,15 @@ fn configurations(args: &IcacheArgs) -> Vec<(&'static str, InstantCacheConfig)> 
 }
 
 pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
-    if args.frames < 2 || !(args.fps > 0.0 && args.fps.is_finite()) {
-        return Err(UsageError("--frames must be at least 2 and --fps positive".into()).into());
-    }
-    let run = AnimationRun::load(&args.target, &args.anim)?;
+    let run = args.run.start()?;
     let configs = configurations(args);
-    let bar = progress_bar(configs.len() as u64 * args.frames as u64, "frames")?;
+    let bar = progress_bar(configs.len() as u64 * args.run.frames as u64, "frames")?;
     let mut reports = Vec::new();
     for (label, config) in configs {
         bar.set_message(label);
         let config = TechniqueConfig::InstantCache(config);
         let mut figures = Vec::new();
-        run.play(&config, args.seed, args.frames, args.fps, |_, frame| {
+        args.run.play(&run, &config, |_, frame| {
             let TechniqueStats::InstantCache(s) = &frame.stats.detail else {
                 anyhow::bail!("instant_cache stats expected");
             };
@@ -148,8 +131,8 @@ pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
     }
     bar.finish_and_clear();
     Ok(IcacheReport {
-        scene: args.target.scene.display().to_string(),
-        animation: args.anim.display().to_string(),
+        scene: args.run.target.scene.display().to_string(),
+        animation: args.run.anim.display().to_string(),
         vpls: args.vpls,
         width: run.scene.camera.width,
         height: run.scene.camera.height,
@@ -205,5 +188,5 @@ pub fn print_table(r: &IcacheReport, audit: bool) {
 pub fn run(args: IcacheArgs) -> Result<()> {
     let report = measure(&args)?;
     print_table(&report, args.audit);
-    super::write_json_report(args.json.as_deref(), &report)
+    super::write_json_report(args.run.json.as_deref(), &report)
 }

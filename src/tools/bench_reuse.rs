@@ -7,34 +7,20 @@
 //! filled segments); camera and shadow rays are the same in every mode and left out.
 //! `verify` time is origin updates with DM_C, dynamic occlusions and pruning; `trace` is fills
 //! and retraces.
-use super::{progress_bar, quantile, AnimationRun, SceneArgs, UsageError};
+use super::{progress_bar, quantile, AnimationArgs};
 use crate::technique::photon_reuse::{PhotonReuseConfig, ReuseMode};
 use crate::technique::{TechniqueConfig, TechniqueStats};
 use anyhow::Result;
 use serde::Serialize;
 use std::collections::BTreeMap;
-use std::path::PathBuf;
 
 #[derive(clap::Args, Debug)]
 pub struct ReuseArgs {
     #[command(flatten)]
-    pub target: SceneArgs,
-    /// Animation to play (NAME.anim.json).
-    #[arg(long)]
-    pub anim: PathBuf,
-    #[arg(long, default_value_t = 60)]
-    pub frames: u32,
-    /// Animation frames per second (time step between frames).
-    #[arg(long, default_value_t = 30.0)]
-    pub fps: f32,
+    pub run: AnimationArgs,
     /// Photon paths.
     #[arg(long, default_value_t = 1_000_000)]
     pub paths: u32,
-    #[arg(long, default_value_t = 1)]
-    pub seed: u64,
-    /// Also write the report as JSON.
-    #[arg(long)]
-    pub json: Option<PathBuf>,
 }
 
 #[derive(Debug, Serialize)]
@@ -81,12 +67,9 @@ fn verify_ms(f: &FrameFigures) -> f64 {
 }
 
 pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
-    if args.frames < 2 || !(args.fps > 0.0 && args.fps.is_finite()) {
-        return Err(UsageError("--frames must be at least 2 and --fps positive".into()).into());
-    }
-    let run = AnimationRun::load(&args.target, &args.anim)?;
+    let run = args.run.start()?;
     let modes = [ReuseMode::Off, ReuseMode::Naive, ReuseMode::Error];
-    let bar = progress_bar(modes.len() as u64 * args.frames as u64, "frames")?;
+    let bar = progress_bar(modes.len() as u64 * args.run.frames as u64, "frames")?;
     let mut reports = Vec::new();
     for mode in modes {
         let name = serde_json::to_value(mode)?.as_str().unwrap_or("?").to_string();
@@ -98,7 +81,7 @@ pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
         });
         let mut figures = Vec::new();
         let mut memory = 0;
-        run.play(&config, args.seed, args.frames, args.fps, |_, frame| {
+        args.run.play(&run, &config, |_, frame| {
             let TechniqueStats::PhotonReuse(s) = &frame.stats.detail else {
                 anyhow::bail!("photon_reuse stats expected");
             };
@@ -143,8 +126,8 @@ pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
     }
     bar.finish_and_clear();
     Ok(ReuseReport {
-        scene: args.target.scene.display().to_string(),
-        animation: args.anim.display().to_string(),
+        scene: args.run.target.scene.display().to_string(),
+        animation: args.run.anim.display().to_string(),
         paths: args.paths,
         width: run.scene.camera.width,
         height: run.scene.camera.height,
@@ -189,5 +172,5 @@ pub fn print_table(r: &ReuseReport) {
 pub fn run(args: ReuseArgs) -> Result<()> {
     let report = measure(&args)?;
     print_table(&report);
-    super::write_json_report(args.json.as_deref(), &report)
+    super::write_json_report(args.run.json.as_deref(), &report)
 }

@@ -83,6 +83,46 @@ pub fn progress_bar(len: u64, unit: &str) -> anyhow::Result<indicatif::ProgressB
     Ok(bar)
 }
 
+/// The arguments `bench reuse` and `bench icache` share: a scene, an animation and how to play it.
+#[derive(clap::Args, Debug)]
+pub struct AnimationArgs {
+    #[command(flatten)]
+    pub target: SceneArgs,
+    /// Animation to play (NAME.anim.json).
+    #[arg(long)]
+    pub anim: PathBuf,
+    #[arg(long, default_value_t = 60)]
+    pub frames: u32,
+    /// Animation frames per second (time step between frames).
+    #[arg(long, default_value_t = 30.0)]
+    pub fps: f32,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Also write the report as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+}
+
+impl AnimationArgs {
+    /// Checks the frame count and rate, then loads the scene and animation.
+    pub fn start(&self) -> anyhow::Result<AnimationRun> {
+        if self.frames < 2 || !(self.fps > 0.0 && self.fps.is_finite()) {
+            return Err(UsageError("--frames must be at least 2 and --fps positive".into()).into());
+        }
+        AnimationRun::load(&self.target, &self.anim)
+    }
+
+    /// Plays the animation in a fresh session of `config` on `run` (see [`AnimationRun::play`]).
+    pub fn play(
+        &self,
+        run: &AnimationRun,
+        config: &crate::technique::TechniqueConfig,
+        each: impl FnMut(u32, &crate::engine::Frame) -> anyhow::Result<()> + Send,
+    ) -> anyhow::Result<()> {
+        run.play(config, self.seed, self.frames, self.fps, each)
+    }
+}
+
 /// What an animation benchmark plays: the scene, its animation, a thread pool and a device.
 pub struct AnimationRun {
     pub scene: crate::scene::Scene,
