@@ -1,4 +1,7 @@
-//! The Embree layer against analytic answers, on the real library.
+//! The Embree layer against analytic answers, on the real library. The query tests run under
+//! every Embree kernel family this CPU has (`for_each_isa`).
+mod common;
+use common::for_each_isa;
 use glam::{Affine3A, Quat, Vec3};
 use relume::embree::{CommittedScene, Device, EmbreeError, Ray, Scene, SceneQuality};
 use std::sync::Arc;
@@ -13,9 +16,12 @@ fn square(device: &Device) -> Scene {
 }
 
 #[test]
-fn hit_and_miss_match_the_plane_equation() {
-    let device = Device::new(1).unwrap();
-    let scene = square(&device).commit().unwrap();
+fn under_every_isa_hits_and_misses_match_the_plane_equation() {
+    for_each_isa(|_, device| hits_and_misses_match_the_plane_equation(device));
+}
+
+fn hits_and_misses_match_the_plane_equation(device: &Device) {
+    let scene = square(device).commit().unwrap();
     // Ray from z=5 straight down at (0.3, -0.2): hits at t = 5 with barycentrics that give the point back.
     let ray = Ray::new(Vec3::new(0.3, -0.2, 5.0), Vec3::new(0.0, 0.0, -1.0));
     let hit = scene.intersect1(&ray).expect("must hit the square");
@@ -38,9 +44,12 @@ fn hit_and_miss_match_the_plane_equation() {
 }
 
 #[test]
-fn packets_agree_with_single_rays() {
-    let device = Device::new(1).unwrap();
-    let scene = square(&device).commit().unwrap();
+fn under_every_isa_packets_agree_with_single_rays() {
+    for_each_isa(|_, device| packets_agree_with_single_rays(device));
+}
+
+fn packets_agree_with_single_rays(device: &Device) {
+    let scene = square(device).commit().unwrap();
     let rays8: [Ray; 8] = std::array::from_fn(|i| Ray::new(Vec3::new(-1.4 + 0.4 * i as f32, 0.1, 3.0), Vec3::NEG_Z));
     let mut active = [true; 8];
     active[3] = false;
@@ -65,6 +74,45 @@ fn packets_agree_with_single_rays() {
         assert_eq!(hits[i], scene.intersect1(&rays16[i]), "lane {i}");
         assert_eq!(occ[i], hits[i].is_some());
     }
+}
+
+#[test]
+fn under_every_isa_an_empty_scene_is_missed_by_every_query() {
+    // Embree commits a scene with no geometry; every query must miss it, directly and through
+    // an instance, and its bounds are empty.
+    for_each_isa(|isa, device| {
+        let empty = Arc::new(Scene::new(device, SceneQuality::Static).unwrap().commit().unwrap());
+        let mut top = Scene::new(device, SceneQuality::Dynamic).unwrap();
+        top.attach_instance(empty.clone(), Affine3A::IDENTITY).unwrap();
+        let top = top.commit().unwrap();
+        for scene in [&*empty, &top] {
+            assert_eq!(scene.bounds(), None, "{isa}");
+            let ray = Ray::new(Vec3::new(0.0, 0.0, 5.0), Vec3::NEG_Z);
+            assert_eq!(scene.intersect1(&ray), None, "{isa}");
+            assert!(!scene.occluded1(&ray), "{isa}");
+            let (mut hits, mut occ) = ([None; 16], [false; 16]);
+            scene.intersect16(&[ray; 16], &[true; 16], true, &mut hits);
+            scene.occluded16(&[ray; 16], &[true; 16], &mut occ);
+            assert!(hits.iter().all(Option::is_none) && occ.iter().all(|o| !o), "{isa}");
+            let (mut hits, mut occ) = ([None; 8], [false; 8]);
+            scene.intersect8(&[ray; 8], &[true; 8], false, &mut hits);
+            scene.occluded8(&[ray; 8], &[true; 8], &mut occ);
+            assert!(hits.iter().all(Option::is_none) && occ.iter().all(|o| !o), "{isa}");
+        }
+    });
+}
+
+#[test]
+fn a_cpu_without_a_family_refuses_it_by_name() {
+    use relume::embree::Isa;
+    for isa in Isa::ALL.into_iter().filter(|i| !i.supported_by_cpu()) {
+        let e = Device::with_isa(1, Some(isa)).expect_err("an unsupported family must be refused");
+        assert!(e.to_string().contains(isa.name()), "{e}");
+    }
+    // The cap is what the device reports; without one, the widest family this CPU has.
+    let widest = *Isa::supported().last().unwrap();
+    assert_eq!(Device::new(1).unwrap().isa(), widest);
+    assert_eq!(Device::with_isa(1, Some(Isa::Sse2)).unwrap().isa(), Isa::Sse2);
 }
 
 #[test]

@@ -3,7 +3,6 @@ mod common;
 use common::*;
 use relume::film::LinearImage;
 use relume::scene::{Scene, SceneDesc};
-use relume::technique::photon_reuse::PhotonReuseConfig;
 use relume::technique::TechniqueConfig;
 use serde_json::json;
 
@@ -55,19 +54,6 @@ fn far_from_the_origin_and_at_any_scale_the_cornell_box_renders_the_same() {
     }
 }
 
-/// Every technique, small enough for many hard cases.
-fn techniques() -> [TechniqueConfig; 7] {
-    [
-        TechniqueConfig::Path(path(4)),
-        TechniqueConfig::PhotonReuse(PhotonReuseConfig { paths: 20_000, ..PhotonReuseConfig::default() }),
-        TechniqueConfig::Bdpt(relume::technique::bdpt::BdptConfig { spp: 2, ..Default::default() }),
-        TechniqueConfig::from_spec("instant_cache:igi").unwrap(),
-        TechniqueConfig::from_spec("instant_cache:static").unwrap(),
-        TechniqueConfig::from_spec("instant_cache:temporal").unwrap(),
-        TechniqueConfig::from_spec("particle_gi:particles=4000:gather_links=8").unwrap(),
-    ]
-}
-
 /// A 4 m diffuse floor, a camera and a point light of `intensity` placed by the caller.
 fn floor_scene(camera: [f32; 3], light: [f32; 3], intensity: f32) -> Scene {
     scene_from_json(json!({
@@ -85,7 +71,7 @@ fn grazing_camera_and_light_give_finite_non_negative_images() {
     // Property: at 89.9° from the normal, cosines near zero and long footprints produce no NaN,
     // Inf or negative radiance in any technique.
     let h = 5.0 * 0.1f32.to_radians().tan();
-    for config in techniques() {
+    for config in small_techniques() {
         let img = render(floor_scene([0.0, h, -5.0], [5.0, h, 0.0], 10.0), config.clone(), 3, 2, 2).image;
         assert_finite_non_negative(&img);
         assert!(img.mean().max_component() > 0.0, "{}: the grazing light should still light the floor", config.id());
@@ -103,7 +89,7 @@ fn a_closed_box_leaks_no_light_to_its_outside() {
         "objects": [{"name": "box", "shape": {"type": "box"}, "material": "white"}],
         "lights": [{"name": "bulb", "emitter": {"type": "point", "intensity": [20, 20, 20]}}]
     }));
-    for config in techniques() {
+    for config in small_techniques() {
         let img = render(scene.clone(), config.clone(), 5, 2, 2).image;
         assert_finite_non_negative(&img);
         assert_eq!(img.mean().max_component(), 0.0, "{}: light leaked out of the box", config.id());
@@ -133,7 +119,7 @@ fn degenerate_triangles_are_dropped_with_a_count_and_needles_render_finite() {
     let root = dir.join("scenes");
     let scene = Scene::from_desc(desc, &root, &root).unwrap();
     assert_eq!(scene.dropped_degenerate, vec![("mesh".to_string(), 2)]);
-    for config in techniques() {
+    for config in small_techniques() {
         let img = render(scene.clone(), config, 2, 2, 2).image;
         assert_finite_non_negative(&img);
         assert!(img.mean().max_component() > 0.0);
@@ -155,7 +141,7 @@ fn coincident_surfaces_render_deterministically_and_finite() {
         "lights": [{"name": "bulb", "emitter": {"type": "point", "intensity": [5, 5, 5]},
                     "transform": {"translation": [0, 2, 0]}}]
     }));
-    for config in techniques() {
+    for config in small_techniques() {
         let a = render(scene.clone(), config.clone(), 9, 2, 2).image;
         let b = render(scene.clone(), config.clone(), 9, 2, 2).image;
         assert_finite_non_negative(&a);
@@ -169,7 +155,7 @@ fn extreme_light_placement_and_power_stay_finite_and_linear() {
     // about 1e12 and is carried in f32 and summed in f64); a zero-intensity light gives exact
     // black; radiance is linear in intensity from 1e-20 to 1e20 (no underflow to zero, no
     // overflow to Inf): with the same seed, mean(I)/I is the same for every I.
-    for config in techniques() {
+    for config in small_techniques() {
         let id = config.id();
         let near = render(floor_scene([0.0, 2.0, -3.0], [0.0, 1e-6, 0.0], 1.0), config.clone(), 4, 2, 2).image;
         assert_finite_non_negative(&near);
@@ -224,7 +210,7 @@ fn extreme_albedo_terminates_and_stays_finite() {
     // Properties: at ρ = 1 the closed furnace's radiance diverges, yet every technique stops
     // (path length l_m at its 64-bounce cap; photon paths at B) with finite values; at ρ = 0
     // nothing is reflected: exact black (the light is a point, so not seen directly).
-    for config in techniques() {
+    for config in small_techniques() {
         let bright = render(furnace(1.0), config.clone(), 2, 1, 2).image;
         assert_finite_non_negative(&bright);
         assert!(
@@ -243,7 +229,7 @@ fn the_same_seed_gives_the_same_image_on_one_and_two_threads() {
     // thread, so results do not depend on scheduling, for every technique.
     let mut scene = load("bunnies-1.json");
     scene.set_resolution(24, 24);
-    for config in techniques() {
+    for config in small_techniques() {
         let one = render(scene.clone(), config.clone(), 17, 2, 1).image;
         let two = render(scene.clone(), config.clone(), 17, 2, 2).image;
         assert_eq!(one, two, "{}", config.id());

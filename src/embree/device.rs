@@ -1,5 +1,6 @@
 //! The Embree device: one per process, shared by reference count.
 use super::error::{error_name, EmbreeError};
+use super::isa::Isa;
 use super::sys;
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::sync::Arc;
@@ -13,6 +14,8 @@ pub struct Device {
 
 struct DeviceHandle {
     raw: sys::RTCDevice,
+    /// The kernel family Embree runs: the cap asked for, or the widest this CPU has.
+    isa: Isa,
 }
 
 // SAFETY: Embree devices are thread-safe: the API may be called on one device from any thread
@@ -44,7 +47,24 @@ impl Device {
     /// Creates a device whose build threads match `threads` (the rayon pool size); `0` lets
     /// Embree use every core.
     pub fn new(threads: usize) -> Result<Device, EmbreeError> {
-        Self::with_config(&format!("threads={threads},set_affinity=0,verbose=0"))
+        Self::with_isa(threads, None)
+    }
+
+    /// As [`Device::new`], with Embree's kernels capped at `max_isa` (`None`: the widest this
+    /// CPU supports). A family the CPU cannot run is refused rather than silently narrowed.
+    pub fn with_isa(threads: usize, max_isa: Option<Isa>) -> Result<Device, EmbreeError> {
+        let mut config = format!("threads={threads},set_affinity=0,verbose=0");
+        if let Some(isa) = max_isa {
+            if !isa.supported_by_cpu() {
+                let has: Vec<&str> = Isa::supported().iter().map(|i| i.name()).collect();
+                return Err(EmbreeError::Device {
+                    code: "RTC_ERROR_UNSUPPORTED_CPU",
+                    context: format!("this CPU cannot run Embree's {isa} kernels (it has {})", has.join(", ")),
+                });
+            }
+            config.push_str(&format!(",max_isa={isa}"));
+        }
+        Self::with_config(&config)
     }
 
     /// Creates a device from an Embree configuration string (see `rtcNewDevice`).
@@ -63,7 +83,18 @@ impl Device {
         // SAFETY: `raw` is a live device; the callback is a plain extern fn with no user data,
         // valid for the whole program.
         unsafe { sys::rtcSetDeviceErrorFunction(raw, Some(log_device_error), std::ptr::null_mut()) };
-        Ok(Device { inner: Arc::new(DeviceHandle { raw }) })
+        let widest = Isa::supported().last().copied().unwrap_or(Isa::Sse2);
+        let isa = config
+            .split(',')
+            .filter_map(|kv| kv.trim().strip_prefix("max_isa=").or_else(|| kv.trim().strip_prefix("isa=")))
+            .find_map(|name| name.parse::<Isa>().ok())
+            .map_or(widest, |cap| cap.min(widest));
+        Ok(Device { inner: Arc::new(DeviceHandle { raw, isa }) })
+    }
+
+    /// The kernel family this device's queries run.
+    pub fn isa(&self) -> Isa {
+        self.inner.isa
     }
 
     pub(crate) fn raw(&self) -> sys::RTCDevice {
@@ -84,6 +115,6 @@ impl Device {
 
 impl std::fmt::Debug for Device {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Device").field("holders", &Arc::strong_count(&self.inner)).finish()
+        f.debug_struct("Device").field("isa", &self.inner.isa).field("holders", &Arc::strong_count(&self.inner)).finish()
     }
 }

@@ -1,7 +1,8 @@
 //! The Embree layer: the only module with `unsafe` code.
 //!
 //! Purpose: a small safe wrapper over the system Embree 3 library (Debian `libembree-dev`).
-//! - [`Device`]: one per process, ref-counted, with an error callback routed to `tracing`.
+//! - [`Device`]: one per process, ref-counted, with an error callback routed to `tracing`, and
+//!   an optional cap on the kernel family ([`Isa`], `max_isa=`).
 //! - [`Scene`] (mutable, being built) → [`Scene::commit`] → [`CommittedScene`] (immutable,
 //!   `Send + Sync`, shared by every tracing thread). [`CommittedScene::edit`] turns it back into a
 //!   `Scene` only when no one else holds it, so nothing can trace while Embree commits.
@@ -10,14 +11,52 @@
 //! - Queries: single rays and 8/16-wide packets, closest hit and occlusion.
 //!
 //! Units: whatever the scene uses (meters by convention); `t` is in units of the ray direction's
-//! length. Directions need not be normalised. Invariants: every raw handle is released exactly
-//! once (in `Drop`), and buffers shared with Embree outlive every scene that references them.
+//! length. Directions need not be normalised.
+//!
+//! ## The FFI contracts, and what guarantees each
+//! Checked against Embree 3.13's API pages (`rtcIntersect1/4/8/16(3)`, `rtcOccluded*(3)`,
+//! `rtcSetSharedGeometryBuffer(3)`, `RTC_GEOMETRY_TYPE_TRIANGLE(3)`, `rtcCommitScene(3)`,
+//! `rtcSetDeviceErrorFunction(3)`, `rtcGetDeviceError(3)`, `rtcGetSceneBounds(3)`).
+//! - **Alignment.** Valid masks and packets: 32 bytes for 8 lanes, 64 for 16; single rays and
+//!   hits and `RTCBounds`: 16. Guaranteed by type: `layout.rs` defines `repr(align)` mask types,
+//!   the query calls in `version.rs` accept only them, and `const` assertions check bindgen's
+//!   `RTC_ALIGN` structs. (Until this was so, masks were `[i32; W]` locals, 4-byte aligned, and a
+//!   release build crashed in `rtcIntersect8` under the AVX-512 kernels.)
+//! - **Buffer padding.** Embree reads the last vertex with a 16-byte load, so a `FLOAT3` vertex
+//!   buffer needs 4 bytes past its last element: [`padded_vertex_floats`], tested in
+//!   `scene.rs`. Shared buffers must be 4-byte aligned: they are `Vec<f32>`/`Vec<u32>`.
+//! - **Shared-buffer lifetimes.** Shared buffers must outlive every use by Embree. Each
+//!   geometry's buffers (or the child scene an instance points at, as an `Arc`) are owned by
+//!   its slot in the scene; a `Vec`'s heap block does not move when the `Vec` does. A detached
+//!   geometry's buffers are kept until the next commit has rebuilt the scene without them, and
+//!   `Drop` releases the scene before its buffers.
+//! - **Commit versus trace.** A scene must not be traced while it commits, nor a child scene
+//!   changed while a parent that instances it is in use. Only `Scene` (owned, not `Sync`) can be
+//!   changed or committed; `CommittedScene` answers queries only, and `edit_shared` reopens it
+//!   only as the last `Arc` holder. Children are held as `Arc<CommittedScene>`, so a child
+//!   cannot be reopened while a parent holds it.
+//! - **Thread safety.** Queries on a committed scene and calls on one device may come from any
+//!   thread (`Send + Sync` on the handles). Every tracing thread sets FTZ/DAZ
+//!   ([`flush_denormals_to_zero`], in the rayon pool's start handler).
+//! - **Errors.** The error callback may be called from any thread during any call: it only
+//!   formats the message and logs it through `tracing` (thread-safe, no unwinding across the
+//!   `extern "C"` boundary, which would abort). `rtcGetDeviceError` reports the calling
+//!   thread's last error, so `Device::check` runs on the thread that made the call, right after
+//!   it.
+//! - **Empty scenes.** A scene with no geometry commits; every ray misses it and
+//!   `rtcGetSceneBounds` returns inverted bounds, reported as `None` (tested in
+//!   `tests/embree.rs`).
+//! - **Kernel families.** The same calls run on every ISA Embree was built with; the tests run
+//!   the queries and a render of every technique under each family this CPU has
+//!   (`tests/embree_isa.rs`).
 //!
 //! Version-specific calls (Embree 3's `RTCIntersectContext` and its inline initialiser) live in
 //! `version.rs` alone, so Embree 4 can be supported by changing that file.
 mod device;
 mod error;
 mod flush;
+mod isa;
+mod layout;
 mod query;
 mod scene;
 mod sys;
@@ -26,5 +65,6 @@ mod version;
 pub use device::Device;
 pub use error::EmbreeError;
 pub use flush::flush_denormals_to_zero;
+pub use isa::{Isa, UnknownIsa};
 pub use query::{Hit, Ray, PACKET16, PACKET8};
 pub use scene::{padded_vertex_floats, CommittedScene, GeometryId, Scene, SceneQuality};

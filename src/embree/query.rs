@@ -1,5 +1,6 @@
 //! Ray queries on a [`CommittedScene`]: single rays and 8/16-wide packets, closest hit and
 //! occlusion. All are `&self` and safe to call from many threads at once.
+use super::layout::{ValidMask16, ValidMask8};
 use super::scene::CommittedScene;
 use super::sys;
 use super::version::{self, Coherence};
@@ -98,7 +99,7 @@ impl CommittedScene {
 
 /// Generates the packet queries for one width; the two widths differ only in types and calls.
 macro_rules! packet_queries {
-    ($width:literal, $rayhit:ident, $ray:ident, $intersect:ident, $occluded:ident, $v_intersect:path, $v_occluded:path) => {
+    ($width:literal, $mask:ident, $rayhit:ident, $ray:ident, $intersect:ident, $occluded:ident, $v_intersect:path, $v_occluded:path) => {
         impl CommittedScene {
             #[doc = concat!("Closest hits of a ", stringify!($width), "-wide packet; inactive lanes are left `None`.")]
             pub fn $intersect(
@@ -108,11 +109,10 @@ macro_rules! packet_queries {
                 coherent: bool,
                 hits: &mut [Option<Hit>; $width],
             ) {
-                let mut valid = [0i32; $width];
+                let valid = $mask::from_active(active);
                 let mut p = sys::$rayhit::default();
                 for i in 0..$width {
                     let r = &rays[i];
-                    valid[i] = if active[i] { -1 } else { 0 };
                     p.ray.org_x[i] = r.origin.x;
                     p.ray.org_y[i] = r.origin.y;
                     p.ray.org_z[i] = r.origin.z;
@@ -142,11 +142,10 @@ macro_rules! packet_queries {
 
             #[doc = concat!("Occlusion of a ", stringify!($width), "-wide packet; inactive lanes report `false`.")]
             pub fn $occluded(&self, rays: &[Ray; $width], active: &[bool; $width], occluded: &mut [bool; $width]) {
-                let mut valid = [0i32; $width];
+                let valid = $mask::from_active(active);
                 let mut p = sys::$ray::default();
                 for i in 0..$width {
                     let r = &rays[i];
-                    valid[i] = if active[i] { -1 } else { 0 };
                     p.org_x[i] = r.origin.x;
                     p.org_y[i] = r.origin.y;
                     p.org_z[i] = r.origin.z;
@@ -166,8 +165,8 @@ macro_rules! packet_queries {
     };
 }
 
-packet_queries!(8, RTCRayHit8, RTCRay8, intersect8, occluded8, version::intersect8, version::occluded8);
-packet_queries!(16, RTCRayHit16, RTCRay16, intersect16, occluded16, version::intersect16, version::occluded16);
+packet_queries!(8, ValidMask8, RTCRayHit8, RTCRay8, intersect8, occluded8, version::intersect8, version::occluded8);
+packet_queries!(16, ValidMask16, RTCRayHit16, RTCRay16, intersect16, occluded16, version::intersect16, version::occluded16);
 
 impl CommittedScene {
     /// Closest hits for any number of lanes: 16 and 8 lanes go to Embree's packet kernels, any

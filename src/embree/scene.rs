@@ -55,6 +55,9 @@ struct SceneHandle {
     device: Device,
     raw: sys::RTCScene,
     geometries: HashMap<GeometryId, GeometrySlot>,
+    /// Buffers of geometries detached since the last commit. The scene's previous build may
+    /// still point into them until `rtcCommitScene` rebuilds it, so they are freed only then.
+    retired: Vec<Attached>,
 }
 
 // SAFETY: Embree scene and geometry handles may be used from any thread; mutation only happens
@@ -102,7 +105,7 @@ impl Scene {
             sys::rtcSetSceneFlags(raw, flags);
             sys::rtcSetSceneBuildQuality(raw, build);
         }
-        let handle = SceneHandle { device: device.clone(), raw, geometries: HashMap::new() };
+        let handle = SceneHandle { device: device.clone(), raw, geometries: HashMap::new(), retired: Vec::new() };
         device.check(|| "rtcSetSceneFlags".into())?;
         Ok(Scene { handle })
     }
@@ -201,20 +204,26 @@ impl Scene {
     /// Removes a geometry from the scene and frees what it kept alive.
     pub fn detach(&mut self, id: GeometryId) -> Result<(), EmbreeError> {
         let slot = self.handle.geometries.remove(&id).ok_or(EmbreeError::UnknownGeometry(id))?;
-        // SAFETY: `id` is attached to this scene; after detaching, our handle is released once
-        // and the buffers it referenced drop with `slot`.
+        // SAFETY: rtcDetachGeometry(3)/rtcReleaseGeometry(3): `id` is attached to this scene and
+        // our handle to it is released exactly once, here. The buffers it shares are kept in
+        // `retired` until the next commit has rebuilt the scene without them.
         unsafe {
             sys::rtcDetachGeometry(self.handle.raw, id);
             sys::rtcReleaseGeometry(slot.raw);
         }
+        self.handle.retired.push(slot._keep);
         self.handle.device.check(|| format!("detach geometry {id}"))
     }
 
     /// Builds the acceleration structure. The result can be shared and queried concurrently.
-    pub fn commit(self) -> Result<CommittedScene, EmbreeError> {
-        // SAFETY: we own the scene exclusively (`self` by value), so no query runs during the build.
+    pub fn commit(mut self) -> Result<CommittedScene, EmbreeError> {
+        // SAFETY: rtcCommitScene(3) must not run while the scene is traced: we own it exclusively
+        // (`self` by value; a `CommittedScene` becomes a `Scene` only as the last holder), and
+        // every instanced child is an immutable `CommittedScene`. A scene with no geometry
+        // commits to an empty scene that every ray misses.
         unsafe { sys::rtcCommitScene(self.handle.raw) };
         self.handle.device.check(|| "rtcCommitScene".into())?;
+        self.handle.retired.clear();
         Ok(CommittedScene { handle: self.handle })
     }
 

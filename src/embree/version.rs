@@ -3,6 +3,7 @@
 //! Embree 3 passes an `RTCIntersectContext` (initialised by the inline `rtcInitIntersectContext`,
 //! which bindgen cannot emit) to every query; Embree 4 replaced it with per-call argument
 //! structs. Everything that depends on that difference is in this file.
+use super::layout::{ValidMask16, ValidMask8};
 use super::sys;
 
 /// How rays in one query relate, as a hint to Embree's traversal.
@@ -29,49 +30,53 @@ pub(crate) fn intersect_context(coherence: Coherence) -> sys::RTCIntersectContex
 /// Closest hit for one ray. The caller passes a committed scene handle.
 pub(crate) fn intersect1(scene: sys::RTCScene, rayhit: &mut sys::RTCRayHit) {
     let mut ctx = intersect_context(Coherence::Incoherent);
-    // SAFETY: `scene` is a committed scene kept alive by the caller's `CommittedScene`;
-    // `ctx` and `rayhit` are valid, exclusively borrowed, 16-byte aligned (bindgen's repr).
+    // SAFETY: rtcIntersect1(3): `scene` is a committed scene kept alive by the caller's
+    // `&CommittedScene`; `ctx` is initialised as `rtcInitIntersectContext` would; `rayhit` is
+    // live, exclusively borrowed and 16-byte aligned by bindgen's RTC_ALIGN(16) (layout.rs).
     unsafe { sys::rtcIntersect1(scene, &mut ctx, rayhit) }
 }
 
 /// Occlusion for one ray: on return `ray.tfar` is `-inf` if anything was hit.
 pub(crate) fn occluded1(scene: sys::RTCScene, ray: &mut sys::RTCRay) {
     let mut ctx = intersect_context(Coherence::Incoherent);
-    // SAFETY: as in `intersect1`; `ray` is a valid, aligned, exclusively borrowed RTCRay.
+    // SAFETY: rtcOccluded1(3): as in `intersect1`; `ray` is a live, exclusively borrowed RTCRay,
+    // 16-byte aligned by RTC_ALIGN(16).
     unsafe { sys::rtcOccluded1(scene, &mut ctx, ray) }
 }
 
 /// Closest hit for an 8-wide packet; lanes with `valid[i] == 0` are ignored.
-pub(crate) fn intersect8(scene: sys::RTCScene, valid: &[i32; 8], rayhit: &mut sys::RTCRayHit8, coherence: Coherence) {
+pub(crate) fn intersect8(scene: sys::RTCScene, valid: &ValidMask8, rayhit: &mut sys::RTCRayHit8, coherence: Coherence) {
     let mut ctx = intersect_context(coherence);
-    // SAFETY: `valid` holds 8 ints as Embree requires; `rayhit` is 32-byte aligned by its
-    // bindgen repr(align(32)); the scene is committed and kept alive by the caller.
-    unsafe { sys::rtcIntersect8(valid.as_ptr(), scene, &mut ctx, rayhit) }
+    // SAFETY: rtcIntersect8(3): `valid` is 8 ints and `rayhit` one packet, both 32-byte aligned
+    // by their types (`ValidMask8`'s repr(align(32)), bindgen's RTC_ALIGN(32); asserted in
+    // layout.rs); both are live, exclusively borrowed for the call; the scene is committed and
+    // kept alive by the caller's `&CommittedScene`.
+    unsafe { sys::rtcIntersect8(valid.0.as_ptr(), scene, &mut ctx, rayhit) }
 }
 
 /// Closest hit for a 16-wide packet.
 pub(crate) fn intersect16(
     scene: sys::RTCScene,
-    valid: &[i32; 16],
+    valid: &ValidMask16,
     rayhit: &mut sys::RTCRayHit16,
     coherence: Coherence,
 ) {
     let mut ctx = intersect_context(coherence);
-    // SAFETY: `valid` holds 16 ints; `rayhit` is 64-byte aligned by its bindgen
-    // repr(align(64)); the scene is committed and kept alive by the caller.
-    unsafe { sys::rtcIntersect16(valid.as_ptr(), scene, &mut ctx, rayhit) }
+    // SAFETY: rtcIntersect16(3): as `intersect8`, with 16 lanes and 64-byte alignment, which
+    // `ValidMask16` and bindgen's RTC_ALIGN(64) give by type (asserted in layout.rs).
+    unsafe { sys::rtcIntersect16(valid.0.as_ptr(), scene, &mut ctx, rayhit) }
 }
 
 /// Occlusion for an 8-wide packet.
-pub(crate) fn occluded8(scene: sys::RTCScene, valid: &[i32; 8], ray: &mut sys::RTCRay8) {
+pub(crate) fn occluded8(scene: sys::RTCScene, valid: &ValidMask8, ray: &mut sys::RTCRay8) {
     let mut ctx = intersect_context(Coherence::Incoherent);
-    // SAFETY: as in `intersect8`, for the ray-only packet type.
-    unsafe { sys::rtcOccluded8(valid.as_ptr(), scene, &mut ctx, ray) }
+    // SAFETY: rtcOccluded8(3): as in `intersect8`, for the ray-only packet type (RTC_ALIGN(32)).
+    unsafe { sys::rtcOccluded8(valid.0.as_ptr(), scene, &mut ctx, ray) }
 }
 
 /// Occlusion for a 16-wide packet.
-pub(crate) fn occluded16(scene: sys::RTCScene, valid: &[i32; 16], ray: &mut sys::RTCRay16) {
+pub(crate) fn occluded16(scene: sys::RTCScene, valid: &ValidMask16, ray: &mut sys::RTCRay16) {
     let mut ctx = intersect_context(Coherence::Incoherent);
-    // SAFETY: as in `intersect16`, for the ray-only packet type.
-    unsafe { sys::rtcOccluded16(valid.as_ptr(), scene, &mut ctx, ray) }
+    // SAFETY: rtcOccluded16(3): as in `intersect16`, for the ray-only packet type (RTC_ALIGN(64)).
+    unsafe { sys::rtcOccluded16(valid.0.as_ptr(), scene, &mut ctx, ray) }
 }

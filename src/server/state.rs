@@ -55,6 +55,8 @@ pub struct ServerConfig {
     pub scenes_root: PathBuf,
     pub token: Option<String>,
     pub threads: usize,
+    /// Cap on Embree's kernel family (`None`: the widest this CPU has).
+    pub isa: Option<crate::embree::Isa>,
     pub limits: Limits,
 }
 
@@ -91,7 +93,7 @@ pub fn valid_name(name: &str) -> bool {
 impl AppState {
     pub fn new(config: ServerConfig) -> Result<AppState, crate::engine::EngineError> {
         let pool = Arc::new(crate::engine::thread_pool(config.threads)?);
-        let device = Device::new(config.threads)?;
+        let device = Device::with_isa(config.threads, config.isa)?;
         let (shutting_down, _) = tokio::sync::watch::channel(false);
         Ok(AppState {
             config,

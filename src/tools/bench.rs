@@ -18,7 +18,7 @@ use crate::scene::{Scene, SceneAccel};
 use crate::technique::bdpt::BdptConfig;
 use crate::technique::path::{max_path_length, PathConfig};
 use crate::technique::{TechniqueConfig, TechniqueStats};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
 use serde::Serialize;
@@ -195,7 +195,7 @@ pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
     let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
     let threads = args.target.threads();
     let pool = thread_pool(threads)?;
-    let device = Device::new(threads).context("creating the Embree device")?;
+    let device = args.target.device()?;
     let accel = SceneAccel::build(&device, &scene)?;
     let variants = [("dark", 0.5f32), ("normal", 1.0), ("bright", 0.8 / scene.mean_reflectance().max(1e-3))];
     let widths = [1u32, 8, 16];

@@ -25,11 +25,22 @@ pub struct SceneArgs {
     /// Rendering threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Cap Embree's kernels at this ISA: sse2, sse4.2, avx, avx2 or avx512 (default: the
+    /// widest this CPU has).
+    #[arg(long, env = "RELUME_EMBREE_ISA")]
+    pub isa: Option<crate::embree::Isa>,
 }
 
 impl SceneArgs {
     pub fn threads(&self) -> usize {
         threads_or_all_cores(self.threads)
+    }
+
+    /// The Embree device for this command: one build thread per rendering thread, kernels
+    /// capped at `--isa`.
+    pub fn device(&self) -> anyhow::Result<crate::embree::Device> {
+        use anyhow::Context;
+        crate::embree::Device::with_isa(self.threads(), self.isa).context("creating the Embree device")
     }
 }
 
@@ -135,14 +146,13 @@ pub struct AnimationRun {
 impl AnimationRun {
     /// Loads and validates the scene and animation (mistakes are usage errors).
     pub fn load(target: &SceneArgs, anim: &Path) -> anyhow::Result<AnimationRun> {
-        use anyhow::Context;
         let scene = render::load_scene(&target.scene, target.width, target.height)?;
         let animation = crate::scene::animation::Animation::load(anim)
             .map_err(|e| UsageError(format!("{}: {e}", anim.display())))?;
         animation.validate(&scene).map_err(|e| UsageError(format!("{}: {e}", anim.display())))?;
         let threads = target.threads();
         let pool = crate::engine::thread_pool(threads)?;
-        let device = crate::embree::Device::new(threads).context("creating the Embree device")?;
+        let device = target.device()?;
         Ok(AnimationRun { scene, anim: animation, threads, pool, device })
     }
 

@@ -79,7 +79,7 @@ fn make_session(args: &RenderArgs, spp_per_tick: u32) -> Result<(Session, rayon:
     let config = technique_config(&args.technique, spp_per_tick)?;
     let threads = args.target.threads();
     let pool = thread_pool(threads)?;
-    let device = Device::new(threads).context("creating the Embree device")?;
+    let device = args.target.device()?;
     let session = Session::new(scene, &config, args.seed, &device)?;
     Ok((session, pool, device))
 }

@@ -22,6 +22,10 @@ pub struct ServeArgs {
     /// Rendering threads shared by all sessions (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Cap Embree's kernels at this ISA: sse2, sse4.2, avx, avx2 or avx512 (default: the
+    /// widest this CPU has).
+    #[arg(long, env = "RELUME_EMBREE_ISA")]
+    pub isa: Option<crate::embree::Isa>,
 }
 
 /// Checks the flags: a non-loopback address needs a token; the scenes folder must exist.
@@ -45,6 +49,7 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
         scenes_root: args.scenes.canonicalize().with_context(|| format!("resolving {}", args.scenes.display()))?,
         token: args.token.clone().filter(|t| !t.is_empty()),
         threads,
+        isa: args.isa,
         limits: Limits { max_sessions: args.max_sessions, ..Limits::default() },
     })
 }
@@ -60,7 +65,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
         let state = Arc::new(AppState::new(config)?);
         let listener =
             tokio::net::TcpListener::bind(args.addr).await.with_context(|| format!("binding {}", args.addr))?;
-        tracing::info!(target: "relume::server", "listening on http://{}", listener.local_addr()?);
+        tracing::info!(target: "relume::server", "listening on http://{} (Embree kernels: {})", listener.local_addr()?, state.device.isa());
         eprintln!("relume: serving {} on http://{}/ (Ctrl-C to stop)", args.scenes.display(), listener.local_addr()?);
         server::run(listener, state, server::shutdown_signal()).await?;
         Ok(())

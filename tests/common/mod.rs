@@ -1,7 +1,7 @@
 //! Helpers shared by the integration tests: load bundled scenes and run sessions on real Embree.
 #![allow(dead_code)]
 pub mod server;
-use relume::embree::Device;
+use relume::embree::{Device, Isa};
 use relume::engine::{thread_pool, Frame, Session};
 use relume::film::LinearImage;
 use relume::scene::Scene;
@@ -20,10 +20,15 @@ pub fn load(name: &str) -> Scene {
 
 /// Runs `ticks` ticks of a fresh session on a pool of `threads` and returns the last frame.
 pub fn render(scene: Scene, config: TechniqueConfig, seed: u64, ticks: u32, threads: usize) -> Frame {
-    let pool = thread_pool(threads).expect("thread pool");
     let device = Device::new(threads).expect("device");
+    render_on(&device, scene, config, seed, ticks, threads)
+}
+
+/// As [`render`], on the given Embree device.
+pub fn render_on(device: &Device, scene: Scene, config: TechniqueConfig, seed: u64, ticks: u32, threads: usize) -> Frame {
+    let pool = thread_pool(threads).expect("thread pool");
     pool.install(|| {
-        let mut session = Session::new(scene, &config, seed, &device).expect("session");
+        let mut session = Session::new(scene, &config, seed, device).expect("session");
         let mut last = None;
         for _ in 0..ticks {
             last = Some(session.tick().expect("tick"));
@@ -84,6 +89,39 @@ pub fn assert_within_one_percent(label: &str, batches: &[f64], expected: f64) {
     let (mean, se) = mean_and_standard_error(batches);
     eprintln!("{label}: {mean:.6} ± {se:.2e} (expected {expected:.6})");
     assert!((mean - expected).abs() + 3.3 * se < 0.01 * expected, "{label}: {mean} (se {se}) vs {expected}");
+}
+
+/// Every technique (and every instant_cache mode), small enough to run many times: the test
+/// matrix of the hard cases and the ISA tests. Covers every id in `TECHNIQUE_IDS`.
+pub fn small_techniques() -> Vec<TechniqueConfig> {
+    let all = vec![
+        TechniqueConfig::Path(path(4)),
+        TechniqueConfig::from_spec("photon_reuse:paths=20000").expect("spec"),
+        TechniqueConfig::from_spec("bdpt:spp=2").expect("spec"),
+        TechniqueConfig::from_spec("instant_cache:igi").expect("spec"),
+        TechniqueConfig::from_spec("instant_cache:static").expect("spec"),
+        TechniqueConfig::from_spec("instant_cache:temporal").expect("spec"),
+        TechniqueConfig::from_spec("particle_gi:particles=4000:gather_links=8").expect("spec"),
+    ];
+    for id in relume::technique::TECHNIQUE_IDS {
+        assert!(all.iter().any(|c| c.id() == *id), "the small test matrix lacks '{id}'");
+    }
+    all
+}
+
+/// Runs `f` with a device for each Embree kernel family this CPU has, narrowest first, and
+/// prints a line for each family it skips.
+pub fn for_each_isa(mut f: impl FnMut(Isa, &Device)) {
+    for isa in Isa::ALL {
+        if !isa.supported_by_cpu() {
+            println!("skipped: Embree's {isa} kernels (this CPU does not have {isa})");
+            continue;
+        }
+        println!("testing Embree's {isa} kernels");
+        let device = Device::with_isa(2, Some(isa)).unwrap_or_else(|e| panic!("{isa}: {e}"));
+        assert_eq!(device.isa(), isa);
+        f(isa, &device);
+    }
 }
 
 pub fn path(spp: u32) -> PathConfig {

@@ -33,6 +33,7 @@ impl TestServer {
             scenes_root: Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").canonicalize().unwrap(),
             token: token.map(str::to_string),
             threads: 2,
+            isa: None,
             limits,
         };
         let state = Arc::new(AppState::new(config).expect("server state"));

@@ -10,7 +10,6 @@ mod report;
 
 use super::render::load_scene;
 use super::{progress_bar, SceneArgs, UsageError};
-use crate::embree::Device;
 use crate::engine::{thread_pool, Session};
 use crate::scene::animation::Animation;
 use crate::technique::TechniqueConfig;
@@ -127,7 +126,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
     };
     let threads = args.target.threads();
     let pool = thread_pool(threads)?;
-    let device = Device::new(threads).context("creating the Embree device")?;
+    let device = args.target.device()?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
 
     // References for every measured frame (one when the scene is static).
