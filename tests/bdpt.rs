@@ -1,7 +1,6 @@
 //! `bdpt` against analytic answers and the `path` reference, and where it beats `path`.
 mod common;
 use common::*;
-use relume::film::LinearImage;
 use relume::technique::bdpt::BdptConfig;
 use relume::technique::TechniqueConfig;
 use serde_json::json;
@@ -36,18 +35,6 @@ fn cornell_box_matches_the_path_reference_with_and_without_permutation() {
         let img = render(scene.clone(), TechniqueConfig::Bdpt(c), 5, 1, 2).image;
         assert_matches_reference(&format!("bdpt permute {permute}"), &img, &reference, 0.02, 0.06, 0.002);
     }
-}
-
-/// relMSE (ε = 0.01) of an image against a reference.
-fn rel_mse(img: &LinearImage, reference: &LinearImage) -> f64 {
-    let mut sum = 0.0;
-    for (a, b) in img.pixels.iter().zip(&reference.pixels) {
-        for (x, y) in a.to_array().iter().zip(b.to_array()) {
-            let d = (*x - y) as f64;
-            sum += d * d / ((y as f64).powi(2) + 0.01);
-        }
-    }
-    sum / (img.pixels.len() * 3) as f64
 }
 
 #[test]

@@ -41,7 +41,6 @@ fn under_every_isa_every_technique_renders() {
     for_each_isa(|isa, device| {
         let row: Vec<f64> = configs.iter().map(|c| mean_luminance(device, c, 7)).collect();
         for (c, m) in configs.iter().zip(&row) {
-            println!("{isa} {}: mean luminance {m:.6}", c.id());
             assert!(*m > 0.0, "{isa} {}: black image", c.id());
         }
         rows.push((isa, row));

@@ -1,53 +1,16 @@
 //! The WebSocket protocol with a real client (tokio-tungstenite) against a real server.
 mod common;
 use common::server::TestServer;
+use common::ws::{next, next_frame, next_text, send, Socket};
 use futures_util::{SinkExt, StreamExt};
-use relume::server::protocol::{FrameFormat, FrameHeader, FRAME_HEADER_LEN};
+use relume::server::protocol::{FrameFormat, FrameHeader};
 use relume::server::Limits;
 use serde_json::{json, Value};
 use std::time::Duration;
 use tokio_tungstenite::tungstenite::Message;
 
-type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
-
 async fn connect(s: &TestServer, id: &str) -> Socket {
-    let (ws, _) =
-        tokio_tungstenite::connect_async(s.ws_url(&format!("/v1/sessions/{id}/ws"))).await.expect("websocket connects");
-    ws
-}
-
-async fn send(ws: &mut Socket, v: Value) {
-    ws.send(Message::Text(v.to_string().into())).await.unwrap();
-}
-
-/// The next message, skipping pings; panics after 20 s.
-async fn next(ws: &mut Socket) -> Message {
-    loop {
-        let m = tokio::time::timeout(Duration::from_secs(20), ws.next())
-            .await
-            .expect("message in time")
-            .expect("open")
-            .expect("ok");
-        if !matches!(m, Message::Ping(_) | Message::Pong(_)) {
-            return m;
-        }
-    }
-}
-
-async fn next_text(ws: &mut Socket) -> Value {
-    match next(ws).await {
-        Message::Text(t) => serde_json::from_str(&t).unwrap(),
-        other => panic!("expected text, got {other:?}"),
-    }
-}
-
-async fn next_frame(ws: &mut Socket) -> (FrameHeader, image::DynamicImage) {
-    loop {
-        if let Message::Binary(b) = next(ws).await {
-            let h = FrameHeader::decode(&b).expect("frame header");
-            return (h, image::load_from_memory(&b[FRAME_HEADER_LEN..]).expect("png decodes"));
-        }
-    }
+    common::ws::open(&s.ws_url(&format!("/v1/sessions/{id}/ws"))).await
 }
 
 fn bunny_at(x: f32) -> Value {

@@ -3,7 +3,8 @@
 //!
 //! 1. **Drain** the queue of client edits.
 //! 2. **Apply** them to the scene model → [`SceneDelta`] (latest edit per target wins; the
-//!    coalesced count is reported).
+//!    coalesced count is reported). An edit that leaves its target as it was is no change: it
+//!    is counted (`edits_unchanged`) and resets, commits and invalidates nothing.
 //! 3. **Commit** only the moved instances to Embree's top-level scene.
 //! 4. **Update** the technique with the delta (verify / invalidate / retrace); the film is reset
 //!    when anything changed.
@@ -156,6 +157,7 @@ impl Session {
             rays: render.rays,
             edits_received: delta.received,
             edits_coalesced: delta.coalesced,
+            edits_unchanged: delta.unchanged,
             moved_surfaces: delta.moved.len(),
             spp: self.film.passes,
             paths_per_pixel: self.film.mean_paths_per_pixel(),

@@ -24,6 +24,8 @@ pub struct TickStats {
     /// Edits drained this tick, and how many of them a later edit to the same target replaced.
     pub edits_received: usize,
     pub edits_coalesced: usize,
+    /// Edits (after coalescing) whose result equalled the current value, so changed nothing.
+    pub edits_unchanged: usize,
     /// Objects and light shapes whose Embree instance was updated.
     pub moved_surfaces: usize,
     /// Render passes accumulated since the last reset.

@@ -80,12 +80,20 @@ fn bracket<K: Keyed + Copy>(keys: &[K], t: f32) -> Option<(K, K, f32)> {
     Some((last, last, 0.0))
 }
 
+/// Linear interpolation that returns a held value exactly (`a·(1−s) + a·s` need not be `a`).
 fn lerp3(a: [f32; 3], b: [f32; 3], s: f32) -> [f32; 3] {
+    if a == b {
+        return a;
+    }
     Vec3::from(a).lerp(Vec3::from(b), s).to_array()
 }
 
-/// TRS interpolation: linear translation and scale, slerp rotation (shortest arc).
+/// TRS interpolation: linear translation and scale, slerp rotation (shortest arc). Between two
+/// equal keys (a hold) the key itself comes back bit for bit, so a held pose is no edit.
 pub fn interpolate_trs(a: &Trs, b: &Trs, s: f32) -> Trs {
+    if a == b {
+        return *a;
+    }
     let (qa, qb) = (Quat::from_array(a.rotation).normalize(), Quat::from_array(b.rotation).normalize());
     Trs {
         translation: lerp3(a.translation, b.translation, s),

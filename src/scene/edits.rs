@@ -5,6 +5,13 @@
 //! as a whole before anything is applied: a bad edit rejects the batch and changes nothing.
 //! Applying yields a [`SceneDelta`] with old and new transforms and world bounds of everything
 //! that moved, which techniques use to verify or invalidate what they store.
+//!
+//! An edit whose result equals the current value is not a change: a transform that gives the
+//! same `world_from_object` bit for bit (so an unnormalised or negated quaternion of the same
+//! rotation counts as the same), a light with the same placement and emitter, a camera with the
+//! same fields, a material with the same parameters. It is counted in
+//! [`SceneDelta::unchanged`] and goes no further: no film reset, no commit, no invalidation.
+//! Animation players re-send every track every frame, so a held pose costs nothing.
 use super::load::{validate_emitter, validate_material, validate_trs, SceneError};
 use super::model::{CameraDesc, EmitterDesc, Material, Trs};
 use super::{Scene, SurfaceId};
@@ -86,6 +93,8 @@ pub struct SceneDelta {
     /// Edits received this tick, and how many of them a later edit to the same target replaced.
     pub received: usize,
     pub coalesced: usize,
+    /// Edits (after coalescing) whose result equalled the current value: no change at all.
+    pub unchanged: usize,
 }
 
 /// How one light changed this tick.
@@ -230,60 +239,90 @@ pub fn apply(scene: &mut Scene, edits: Vec<Edit>) -> Result<SceneDelta, SceneErr
     let (edits, coalesced) = coalesce(edits);
     validate_coalesced(scene, &edits)?;
 
-    // Apply, recording old and new placement.
+    // Apply, recording old and new placement; edits that change nothing are only counted.
     let mut delta = SceneDelta { received, coalesced, ..SceneDelta::default() };
     for (_, e) in edits {
-        match e {
-            Edit::Object { name, transform } => {
-                let idx = scene.object_index(&name).unwrap_or_default();
-                let old_xf = scene.objects[idx].world_from_object;
-                let old_bounds = Aabb::of_points(scene.objects[idx].world_positions.iter().copied());
-                scene.set_object_transform(idx, transform);
-                let o = &scene.objects[idx];
-                delta.moved.push(MovedSurface {
-                    surface: SurfaceId::Object(idx as u32),
-                    old_world_from_object: old_xf,
-                    new_world_from_object: o.world_from_object,
-                    old_bounds,
-                    new_bounds: Aabb::of_points(o.world_positions.iter().copied()),
-                });
-            }
-            Edit::Light { name, transform, emitter } => {
-                let idx = scene.light_index(&name).unwrap_or_default();
-                let old = scene.desc().lights[idx].clone();
-                let old_bounds = light_bounds(scene, idx);
-                let trs = transform.unwrap_or(old.transform);
-                scene.set_light(idx, trs, emitter.unwrap_or(old.emitter.clone()));
-                if trs != old.transform && scene.lights[idx].mesh.is_some() {
-                    delta.moved.push(MovedSurface {
-                        surface: SurfaceId::Light(idx as u32),
-                        old_world_from_object: old.transform.world_from_object(),
-                        new_world_from_object: trs.world_from_object(),
-                        old_bounds,
-                        new_bounds: light_bounds(scene, idx),
-                    });
-                }
-                delta.lights.push(LightChange {
-                    light: idx,
-                    old_world_from_object: old.transform.world_from_object(),
-                    moved: trs != old.transform,
-                    emission_changed: scene.desc().lights[idx].emitter != old.emitter,
-                });
-            }
+        let changed = match e {
+            Edit::Object { name, transform } => apply_object(scene, &name, transform, &mut delta),
+            Edit::Light { name, transform, emitter } => apply_light(scene, &name, transform, emitter, &mut delta),
             e @ Edit::Camera { .. } => {
                 let cam = merged_camera(scene.desc().camera.clone(), &e);
-                scene.set_camera(cam);
-                delta.camera = true;
+                let changed = cam != scene.desc().camera;
+                if changed {
+                    scene.set_camera(cam);
+                    delta.camera = true;
+                }
+                changed
             }
             Edit::Material { name, material } => {
                 let idx = scene.material_names.iter().position(|n| *n == name).unwrap_or_default();
-                delta.previous_materials.push(scene.materials[idx].clone());
-                scene.set_material(idx, material);
-                delta.materials.push(idx);
+                let changed = material != scene.materials[idx];
+                if changed {
+                    delta.previous_materials.push(scene.materials[idx].clone());
+                    scene.set_material(idx, material);
+                    delta.materials.push(idx);
+                }
+                changed
             }
+        };
+        if !changed {
+            delta.unchanged += 1;
         }
     }
     Ok(delta)
+}
+
+/// Moves an object (validated); returns false if its placement stays the same.
+fn apply_object(scene: &mut Scene, name: &str, transform: Trs, delta: &mut SceneDelta) -> bool {
+    let idx = scene.object_index(name).unwrap_or_default();
+    let old_xf = scene.objects[idx].world_from_object;
+    if transform.world_from_object() == old_xf {
+        return false;
+    }
+    let old_bounds = Aabb::of_points(scene.objects[idx].world_positions.iter().copied());
+    scene.set_object_transform(idx, transform);
+    let o = &scene.objects[idx];
+    delta.moved.push(MovedSurface {
+        surface: SurfaceId::Object(idx as u32),
+        old_world_from_object: old_xf,
+        new_world_from_object: o.world_from_object,
+        old_bounds,
+        new_bounds: Aabb::of_points(o.world_positions.iter().copied()),
+    });
+    true
+}
+
+/// Moves a light and/or changes its emitter (validated); returns false if neither changes.
+fn apply_light(
+    scene: &mut Scene,
+    name: &str,
+    transform: Option<Trs>,
+    emitter: Option<EmitterDesc>,
+    delta: &mut SceneDelta,
+) -> bool {
+    let idx = scene.light_index(name).unwrap_or_default();
+    let old = scene.desc().lights[idx].clone();
+    let old_xf = old.transform.world_from_object();
+    let trs = transform.unwrap_or(old.transform);
+    let emitter = emitter.unwrap_or_else(|| old.emitter.clone());
+    let moved = trs.world_from_object() != old_xf;
+    let emission_changed = emitter != old.emitter;
+    if !moved && !emission_changed {
+        return false;
+    }
+    let old_bounds = light_bounds(scene, idx);
+    scene.set_light(idx, if moved { trs } else { old.transform }, emitter);
+    if moved && scene.lights[idx].mesh.is_some() {
+        delta.moved.push(MovedSurface {
+            surface: SurfaceId::Light(idx as u32),
+            old_world_from_object: old_xf,
+            new_world_from_object: trs.world_from_object(),
+            old_bounds,
+            new_bounds: light_bounds(scene, idx),
+        });
+    }
+    delta.lights.push(LightChange { light: idx, old_world_from_object: old_xf, moved, emission_changed });
+    true
 }
 
 fn light_bounds(scene: &Scene, idx: usize) -> Aabb {

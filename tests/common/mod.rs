@@ -1,6 +1,7 @@
 //! Helpers shared by the integration tests: load bundled scenes and run sessions on real Embree.
 #![allow(dead_code)]
 pub mod server;
+pub mod ws;
 use relume::embree::{Device, Isa};
 use relume::engine::{thread_pool, Frame, Session};
 use relume::film::LinearImage;
@@ -144,6 +145,18 @@ pub fn mean_and_standard_error(xs: &[f64]) -> (f64, f64) {
     let mean = xs.iter().sum::<f64>() / n;
     let var = xs.iter().map(|x| (x - mean) * (x - mean)).sum::<f64>() / (n - 1.0);
     (mean, (var / n).sqrt())
+}
+
+/// relMSE (ε = 0.01) of an image against a reference.
+pub fn rel_mse(img: &LinearImage, reference: &LinearImage) -> f64 {
+    let mut sum = 0.0;
+    for (a, b) in img.pixels.iter().zip(&reference.pixels) {
+        for (x, y) in a.to_array().iter().zip(b.to_array()) {
+            let d = (*x - y) as f64;
+            sum += d * d / ((y as f64).powi(2) + 0.01);
+        }
+    }
+    sum / (img.pixels.len() * 3) as f64
 }
 
 pub fn assert_finite_non_negative(img: &LinearImage) {

@@ -76,7 +76,7 @@ function showStats(s, dropped) {
     ["tick", s.tick], ["spp", s.spp], ["accumulation", s.accumulation_id],
     ["tick time (ms)", s.times.total_ms.toFixed(1)],
     ["rays primary", s.rays.primary], ["rays secondary", s.rays.secondary], ["rays shadow", s.rays.shadow],
-    ["edits applied / coalesced", `${s.edits_received} / ${s.edits_coalesced}`],
+    ["edits received / coalesced / unchanged", `${s.edits_received} / ${s.edits_coalesced} / ${s.edits_unchanged}`],
     ["frames dropped", dropped],
   ];
   $("stats").tBodies[0].innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");

@@ -1,0 +1,145 @@
+//! The binary users run, driven end to end as `scripts/run.sh` starts it.
+//!
+//! `scripts/test.sh` runs the suite with `cargo test --release`, so `CARGO_BIN_EXE_relume` is
+//! the release binary, built with the profile users get. This starts `relume serve` on a free
+//! loopback port and, for every technique, creates a session, ticks it over HTTP and over a
+//! WebSocket, and fetches a PNG and an EXR; it runs `relume render` at packet widths 1, 8 and
+//! 16 under every Embree kernel family this CPU has; and it stops the server with SIGTERM,
+//! which must exit 0. A crash anywhere (a signal instead of an exit code) fails the test.
+mod common;
+use common::ws::{next_frame, next_text, send};
+use serde_json::{json, Value};
+use std::io::{BufRead, BufReader};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_relume");
+
+/// A running `relume serve` and the address it printed.
+struct Served {
+    child: Child,
+    addr: String,
+}
+
+impl Served {
+    fn start() -> Served {
+        let mut child = Command::new(BIN)
+            .args(["serve", "--addr", "127.0.0.1:0", "--threads", "2", "--scenes"])
+            .arg(common::scenes_dir())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("relume serve starts");
+        let mut lines = BufReader::new(child.stderr.take().expect("stderr")).lines();
+        let addr = loop {
+            let line = lines.next().expect("serve printed its address before exiting").expect("stderr line");
+            // "relume: serving DIR on http://ADDR/ (Ctrl-C to stop)"
+            if let Some(rest) = line.strip_prefix("relume: serving").and_then(|l| l.split(" on http://").nth(1)) {
+                break rest.split('/').next().unwrap_or_default().to_string();
+            }
+        };
+        // Keep draining stderr so the server never blocks on a full pipe.
+        std::thread::spawn(move || lines.for_each(drop));
+        Served { child, addr }
+    }
+
+    fn url(&self, path: &str) -> String {
+        format!("http://{}{path}", self.addr)
+    }
+
+    /// Sends SIGTERM and waits (bounded) for the exit status.
+    fn terminate(mut self) -> std::process::ExitStatus {
+        let pid = self.child.id().to_string();
+        let killed = Command::new("kill").args(["-TERM", &pid]).status().expect("kill runs");
+        assert!(killed.success());
+        let deadline = Instant::now() + Duration::from_secs(60);
+        loop {
+            if let Some(status) = self.child.try_wait().expect("wait") {
+                return status;
+            }
+            assert!(Instant::now() < deadline, "relume serve did not exit within 60 s of SIGTERM");
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+    }
+}
+
+async fn drive_session(http: &reqwest::Client, served: &Served, technique: Value) {
+    let label = technique["id"].as_str().unwrap_or("?").to_string();
+    let body = json!({"scene": "cornell-box", "width": 24, "height": 24, "technique": technique});
+    let r = http.post(served.url("/v1/sessions")).json(&body).send().await.expect("create");
+    assert_eq!(r.status(), 201, "{label}: {}", r.text().await.unwrap_or_default());
+    let id = r.json::<Value>().await.expect("json")["id"].as_str().expect("id").to_string();
+
+    // Tick over HTTP; fetch that tick's PNG and EXR.
+    let r = http.post(served.url(&format!("/v1/sessions/{id}/tick"))).send().await.expect("tick");
+    assert_eq!(r.status(), 200, "{label}: {}", r.text().await.unwrap_or_default());
+    let png = http.get(served.url(&format!("/v1/sessions/{id}/frame.png?tick=0"))).send().await.expect("png");
+    assert_eq!(png.status(), 200, "{label}");
+    let png = image::load_from_memory(&png.bytes().await.expect("bytes")).expect("a PNG");
+    assert_eq!((png.width(), png.height()), (24, 24), "{label}");
+    let exr = http.get(served.url(&format!("/v1/sessions/{id}/frame.exr?tick=0"))).send().await.expect("exr");
+    assert_eq!(exr.status(), 200, "{label}");
+    let exr = exr.bytes().await.expect("bytes");
+    assert_eq!(&exr[..4], &[0x76, 0x2f, 0x31, 0x01], "{label}: not an OpenEXR file");
+
+    // Tick over the WebSocket: stats and a frame of the next tick.
+    let mut ws = common::ws::open(&format!("ws://{}/v1/sessions/{id}/ws", served.addr)).await;
+    send(&mut ws, json!({"type": "subscribe", "frames": "png", "stats": true, "every": 1})).await;
+    send(&mut ws, json!({"type": "tick"})).await;
+    let stats = next_text(&mut ws).await;
+    assert_eq!((stats["type"].as_str(), stats["stats"]["tick"].as_u64()), (Some("stats"), Some(1)), "{label}: {stats}");
+    let (header, frame) = next_frame(&mut ws).await;
+    assert_eq!((header.tick, frame.width()), (1, 24), "{label}");
+    drop(ws);
+    let r = http.delete(served.url(&format!("/v1/sessions/{id}"))).send().await.expect("delete");
+    assert!(r.status().is_success(), "{label}");
+}
+
+#[test]
+fn the_release_binary_serves_every_technique_and_stops_on_sigterm() {
+    let served = Served::start();
+    let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
+    runtime.block_on(async {
+        let http = reqwest::Client::new();
+        let mut seen = Vec::new();
+        for config in common::small_techniques() {
+            if seen.contains(&config.id()) {
+                continue;
+            }
+            seen.push(config.id());
+            drive_session(&http, &served, serde_json::to_value(&config).expect("config JSON")).await;
+        }
+    });
+    let status = served.terminate();
+    assert_eq!(status.code(), Some(0), "relume serve ended with {status:?} after SIGTERM");
+}
+
+#[test]
+fn the_release_binary_renders_at_every_packet_width_under_every_isa() {
+    let dir = std::env::temp_dir().join(format!("relume-e2e-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    common::for_each_isa(|isa, _| {
+        for width in [1, 8, 16] {
+            let out = dir.join(format!("{isa}-{width}.png"));
+            let status = Command::new(BIN)
+                .args(["render", "--width", "32", "--height", "32", "--spp", "2", "--isa", isa.name()])
+                .arg(common::scenes_dir().join("cornell-box.json"))
+                .arg("--technique")
+                .arg(format!("path:packet_width={width}"))
+                .arg("--out")
+                .arg(&out)
+                .stderr(Stdio::null())
+                .status()
+                .expect("relume render runs");
+            assert_eq!(status.code(), Some(0), "render under {isa} at width {width} ended with {status:?}");
+            let img = image::open(&out).expect("the PNG it wrote");
+            assert_eq!((img.width(), img.height()), (32, 32));
+        }
+    });
+    let _ = std::fs::remove_dir_all(&dir);
+}
