@@ -12,7 +12,7 @@ fn bdpt(spp: u32) -> BdptConfig {
 #[test]
 fn furnace_matches_the_analytic_radiance_within_one_percent() {
     // Property: the weighted strategies sum to an unbiased estimate; c = 1e-4 makes the l_m
-    // truncation negligible. The bound includes 3.3 standard errors over independent seeds.
+    // truncation negligible. The bound includes the 99.9% Student-t interval over independent seeds.
     for permute in [true, false] {
         let c = TechniqueConfig::Bdpt(BdptConfig { admitted_truncation: 1e-4, permute, ..bdpt(16) });
         assert_within_one_percent(
@@ -35,6 +35,10 @@ fn cornell_box_matches_the_path_reference_with_and_without_permutation() {
         let img = render(scene.clone(), TechniqueConfig::Bdpt(c), 5, 1, 2).image;
         assert_matches_reference(&format!("bdpt permute {permute}"), &img, &reference, 0.02, 0.06, 0.002);
     }
+    // Negative control: bdpt cut to two-vertex paths (no indirect light) fails the same bound.
+    let broken = BdptConfig { max_path_length: Some(2), ..BdptConfig { spp: 2, ..Default::default() } };
+    let img = render(scene.clone(), TechniqueConfig::Bdpt(broken), 5, 1, 2).image;
+    assert_rejected_by_reference("bdpt, two vertices", &img, &reference, 0.02, 0.06, 0.002);
 }
 
 #[test]

@@ -3,7 +3,7 @@ mod common;
 use common::*;
 use relume::film::LinearImage;
 use relume::scene::{Scene, SceneDesc};
-use relume::technique::TechniqueConfig;
+use relume::technique::{TechniqueConfig, TechniqueStats};
 use serde_json::json;
 
 /// The Cornell box with every position mapped by x ↦ s·x + offset (objects, lights, camera).
@@ -205,19 +205,41 @@ fn furnace(rho: f32) -> Scene {
     }))
 }
 
+/// How many scattering events the technique's paths reach before it truncates them, as its
+/// configuration or stats say: path and bdpt stop at l_m vertices, photon paths at B photons,
+/// an instant-cache VPL path at its VPL cap (plus direct light), particle light after the
+/// emission, the first bounce and n_b more.
+fn truncation_depth(config: &TechniqueConfig, detail: &TechniqueStats) -> f32 {
+    match (config, detail) {
+        (_, TechniqueStats::Path(s)) => s.max_path_length as f32,
+        (_, TechniqueStats::Bdpt(s)) => s.lanes.max_path_length as f32,
+        (TechniqueConfig::PhotonReuse(c), _) => c.max_photons as f32,
+        (_, TechniqueStats::InstantCache(s)) => (s.vpls / s.vpl_paths.max(1)) as f32 + 1.0,
+        (_, TechniqueStats::ParticleGi(s)) => s.bounces as f32 + 2.0,
+        _ => panic!("no truncation depth for {}", config.id()),
+    }
+}
+
 #[test]
 fn extreme_albedo_terminates_and_stays_finite() {
     // Properties: at ρ = 1 the closed furnace's radiance diverges, yet every technique stops
-    // (path length l_m at its 64-bounce cap; photon paths at B) with finite values; at ρ = 0
-    // nothing is reflected: exact black (the light is a point, so not seen directly).
+    // with finite values. Truncated after k scattering events, the answer is the series
+    // (I/πR²) Σ_{j=1..k} ρ^j = k/π: each technique must give its own k/π within 10% (one tick
+    // of 8×8 pixels). Negative control: ρ = 0.9 (a series below 9/π) must fail that bound for
+    // every technique, so the bound tells a truncated ρ = 1 series from a converging one.
+    // At ρ = 0 nothing is reflected: exact black (the light is a point, so not seen directly).
     for config in small_techniques() {
-        let bright = render(furnace(1.0), config.clone(), 2, 1, 2).image;
-        assert_finite_non_negative(&bright);
-        assert!(
-            bright.mean().g > 1.0 / std::f32::consts::PI,
-            "{}: ρ = 1 should exceed the ρ = 0.5 answer",
-            config.id()
-        );
+        let within = |rho: f32| {
+            let frame = render(furnace(rho), config.clone(), 2, 1, 2);
+            assert_finite_non_negative(&frame.image);
+            let k = truncation_depth(&config, &frame.stats.detail);
+            let got = frame.image.mean().g * std::f32::consts::PI;
+            eprintln!("{} at ρ = {rho}: {got:.3}/π against {k}/π", config.id());
+            ((got - k).abs() <= 0.1 * k, got, k)
+        };
+        let (ok, got, k) = within(1.0);
+        assert!(ok, "{}: ρ = 1 gives {got}/π, the truncated series {k}/π", config.id());
+        assert!(!within(0.9).0, "{}: the bound cannot tell ρ = 0.9 from ρ = 1", config.id());
         let black = render(furnace(0.0), config.clone(), 2, 1, 2).image;
         assert!(black.pixels.iter().all(|p| p.max_component() == 0.0), "{}", config.id());
     }

@@ -49,6 +49,11 @@ fn cornell_box_matches_the_path_reference_within_the_vpl_bias() {
         let frame = render(scene.clone(), TechniqueConfig::InstantCache(c), 5, 1, 2);
         assert_matches_reference(&format!("{mode:?}"), &frame.image, &reference, 0.04, 0.15, 0.003);
     }
+    // Negative control: VPL paths cut after their first bounce (a truncation of 0.99) fail the
+    // same bounds.
+    let broken = InstantCacheConfig { spp: 64, vpls: 1024, admitted_truncation: 0.99, ..config(CacheMode::Static) };
+    let frame = render(scene, TechniqueConfig::InstantCache(broken), 5, 1, 2);
+    assert_rejected_by_reference("instant_cache, one bounce", &frame.image, &reference, 0.04, 0.15, 0.003);
 }
 
 #[test]

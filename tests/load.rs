@@ -29,7 +29,6 @@ async fn two_sessions_for_five_seconds_lose_nothing() {
     assert_eq!(r.errors, 0, "{:?}", r.error_samples);
     assert_eq!(r.lost_edits, 0);
     assert!(r.edits_sent > 0 && r.edits_applied > 0);
-    assert_eq!(r.edits_sent, r.edits_applied + r.edits_coalesced);
     assert!(r.frames_received > 2, "{} frames", r.frames_received);
     assert!(r.latency_p50_ms > 0.0 && r.latency_p50_ms <= r.latency_p99_ms);
     // The sessions were cleaned up afterwards.

@@ -6,7 +6,7 @@ use relume::technique::TechniqueConfig;
 #[test]
 fn furnace_matches_the_analytic_radiance_within_one_percent() {
     // Property: the estimator is unbiased up to the l_m truncation, which c = 1e-4 makes
-    // negligible (ρ^l_m ≈ 6e-5). The bound includes 3.3 standard errors (99.9% two-sided).
+    // negligible (ρ^l_m ≈ 6e-5). The bound includes the 99.9% two-sided Student-t interval.
     let config = TechniqueConfig::Path(relume::technique::path::PathConfig { admitted_truncation: 1e-4, ..path(2) });
     assert_within_one_percent("furnace", &furnace_batches(&config, 12, None, 1), furnace_radiance(None));
 }

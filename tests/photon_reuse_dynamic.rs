@@ -233,4 +233,12 @@ fn every_mode_matches_the_path_reference_after_a_block_moves() {
         });
         assert_matches_reference(&format!("{reuse:?}"), &image, &reference, 0.035, 0.12, 0.003);
     }
+    // Negative control: photons and geometry never updated after the move (a session that
+    // did not get it) fail the same bounds against the moved scene's reference.
+    let stale = pool.install(|| {
+        let config = PhotonReuseConfig { paths: 250_000, reuse: ReuseMode::Naive, ..PhotonReuseConfig::default() };
+        let mut s = session(scene.clone(), config, 21, &device);
+        (0..16).map(|_| s.tick().unwrap()).last().unwrap().image
+    });
+    assert_rejected_by_reference("never updated", &stale, &reference, 0.035, 0.12, 0.003);
 }

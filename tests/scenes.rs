@@ -37,22 +37,26 @@ fn every_animation_validates_against_its_scene() {
 
 #[test]
 fn an_animation_moves_instances_and_changes_the_frame() {
-    // Property: edits flow drain → apply → commit: the moved object is hit at its new place, the
-    // old place is free, and the film restarts.
+    // Property: edits flow drain → apply → commit and restart the film. The frame is compared
+    // with a twin session (same seed, same tick) that got no edits, so only the move can make
+    // them differ. The animation's first pose is the scene's own: it changes nothing.
     let mut scene = load("bunnies-1.json");
     scene.set_resolution(32, 32);
     let anim = Animation::load(&scenes_dir().join("bunnies-1.anim.json")).unwrap();
     let device = Device::new(1).unwrap();
     let config = TechniqueConfig::Path(path(2));
-    let mut session = Session::new(scene, &config, 5, &device).unwrap();
+    let mut session = Session::new(scene.clone(), &config, 5, &device).unwrap();
+    let mut twin = Session::new(scene, &config, 5, &device).unwrap();
     session.queue_edits(anim.edits_at(0.0)).unwrap();
     let first = session.tick().unwrap();
-    assert_eq!(first.stats.moved_surfaces, 1);
+    twin.tick().unwrap();
+    assert_eq!((first.stats.moved_surfaces, first.stats.edits_unchanged), (0, 1));
     session.queue_edits(anim.edits_at(anim.duration * 0.5)).unwrap();
-    let second = session.tick().unwrap();
-    assert_eq!(second.stats.moved_surfaces, 1);
-    assert_ne!(first.accumulation_id, second.accumulation_id);
-    assert_ne!(first.image, second.image);
+    let moved = session.tick().unwrap();
+    let still = twin.tick().unwrap();
+    assert_eq!(moved.stats.moved_surfaces, 1);
+    assert_ne!(moved.accumulation_id, still.accumulation_id);
+    assert_ne!(moved.image, still.image, "the move did not change the frame");
 }
 
 #[test]

@@ -32,16 +32,31 @@ async fn edits_tick_frame_and_the_frame_changes_after_a_move() {
     let stats = next_text(&mut ws).await;
     assert_eq!(stats["type"], "stats");
     assert_eq!(stats["stats"]["moved_surfaces"], 1);
-    let (h1, img1) = next_frame(&mut ws).await;
+    let (h1, _) = next_frame(&mut ws).await;
     assert_eq!((h1.tick, h1.format, h1.width, h1.height), (0, FrameFormat::Png, 48, 48));
+
+    // A twin session (same seed) gets the same first edit but not the second; at tick 1 only
+    // the move can make the two frames differ.
+    let twin = s
+        .session(json!({"scene": "bunnies-1", "width": 48, "height": 48, "technique": {"id": "path", "spp": 4}}))
+        .await;
+    let mut tw = connect(&s, &twin).await;
+    send(&mut tw, json!({"type": "subscribe", "frames": "png", "stats": false, "every": 1})).await;
+    send(&mut tw, json!({"type": "edits", "edits": [bunny_at(150.0)]})).await;
+    next_text(&mut tw).await;
+    send(&mut tw, json!({"type": "tick"})).await;
+    next_frame(&mut tw).await;
 
     send(&mut ws, json!({"type": "edits", "edits": [bunny_at(400.0)]})).await;
     next_text(&mut ws).await;
     send(&mut ws, json!({"type": "tick"})).await;
+    send(&mut tw, json!({"type": "tick"})).await;
     let (h2, img2) = next_frame(&mut ws).await;
-    assert_eq!(h2.tick, 1);
+    let (t2, still) = next_frame(&mut tw).await;
+    assert_eq!((h2.tick, t2.tick), (1, 1));
     assert_ne!(h2.accumulation_id, h1.accumulation_id);
-    assert_ne!(img1.to_rgb8().into_raw(), img2.to_rgb8().into_raw(), "moving the bunny must change the frame");
+    assert_eq!(t2.accumulation_id, h1.accumulation_id, "the twin's film kept accumulating");
+    assert_ne!(still.to_rgb8().into_raw(), img2.to_rgb8().into_raw(), "moving the bunny must change the frame");
     s.shutdown().await.unwrap();
 }
 

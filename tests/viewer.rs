@@ -60,7 +60,7 @@ async fn wait_for(c: &fantoccini::Client, script: &str, done: impl Fn(&Value) ->
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn the_viewer_starts_a_session_and_a_drag_changes_the_frame() {
+async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
     let server = TestServer::start(None, Limits::default()).await;
     let (_driver, port) = start_driver().await;
     let caps = json!({
@@ -116,9 +116,15 @@ async fn the_viewer_starts_a_session_and_a_drag_changes_the_frame() {
     // A new accumulation (the object moved) and a different frame arrive.
     let acc0 = before[1].as_u64().unwrap();
     wait_for(&c, "return window.relume.accumulation", |v| v.as_u64() > Some(acc0), "a frame after the drag").await;
-    let after = c.execute("return [window.relume.fingerprint, window.relume.edits || 0]", vec![]).await.unwrap();
+    let after = c.execute("return [window.relume.id, window.relume.edits || 0]", vec![]).await.unwrap();
     assert!(after[1].as_u64() > Some(0), "the drag sent no edits");
-    assert_ne!(after[0], before[0], "the frame did not change after the drag");
+    // The session's scene (not a frame of another tick, whose noise differs anyway) shows the
+    // bunny somewhere else than the bundled scene puts it.
+    let id = after[0].as_str().expect("the viewer's session id");
+    let scene: Value = server.http.get(server.url(&format!("/v1/sessions/{id}/scene"))).send().await.unwrap().json().await.unwrap();
+    let bundled: Value = serde_json::from_str(&std::fs::read_to_string(common::scenes_dir().join("bunnies-1.json")).unwrap()).unwrap();
+    let bunny = |s: &Value| s["objects"].as_array().unwrap().iter().find(|o| o["name"] == "bunny-1").unwrap()["transform"]["translation"].clone();
+    assert_ne!(bunny(&scene), bunny(&bundled), "the drag did not move the bunny");
     // The stats panel shows the tick's numbers.
     let stats_rows = c.execute("return document.querySelectorAll('#stats tr').length", vec![]).await.unwrap();
     assert!(stats_rows.as_u64() >= Some(5));

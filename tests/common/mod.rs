@@ -84,12 +84,21 @@ pub fn furnace_batches(config: &TechniqueConfig, batches: u64, side: Option<u32>
         .collect()
 }
 
-/// Asserts batch estimates match `expected` within 1%, including 3.3 standard errors (99.9%
-/// two-sided) of their mean.
+/// The two-sided 99.9% quantile of Student's t for the mean of `n` batches (n − 1 degrees of
+/// freedom); it tends to the normal 3.29 only for many batches.
+pub fn student_t_999(n: usize) -> f64 {
+    use statrs::distribution::{ContinuousCDF, StudentsT};
+    assert!(n >= 2, "a standard error needs at least two batches");
+    StudentsT::new(0.0, 1.0, (n - 1) as f64).expect("degrees of freedom").inverse_cdf(0.9995)
+}
+
+/// Asserts batch estimates match `expected` within 1%, including the 99.9% two-sided
+/// confidence interval of their mean (Student's t for the batch count, not the normal 3.29).
 pub fn assert_within_one_percent(label: &str, batches: &[f64], expected: f64) {
     let (mean, se) = mean_and_standard_error(batches);
-    eprintln!("{label}: {mean:.6} ± {se:.2e} (expected {expected:.6})");
-    assert!((mean - expected).abs() + 3.3 * se < 0.01 * expected, "{label}: {mean} (se {se}) vs {expected}");
+    let t = student_t_999(batches.len());
+    eprintln!("{label}: {mean:.6} ± {se:.2e} (t = {t:.2}; expected {expected:.6})");
+    assert!((mean - expected).abs() + t * se < 0.01 * expected, "{label}: {mean} (se {se}, t {t}) vs {expected}");
 }
 
 /// Every technique (and every instant_cache mode), small enough to run many times: the test
@@ -183,9 +192,31 @@ pub fn block_means(img: &LinearImage) -> Vec<f64> {
     out
 }
 
-/// Asserts `image` matches `reference`: every channel mean within `channel_tolerance`
+/// Whether `image` matches `reference`: every channel mean within `channel_tolerance`
 /// (relative), and every 4×4 block's mean luminance within `block_tolerance` (relative) plus
-/// `block_floor` (absolute, for dark blocks).
+/// `block_floor` (absolute, for dark blocks). `Err` says which comparison failed.
+pub fn matches_reference(
+    image: &LinearImage,
+    reference: &LinearImage,
+    channel_tolerance: f32,
+    block_tolerance: f64,
+    block_floor: f64,
+) -> Result<(), String> {
+    let (a, b) = (image.mean(), reference.mean());
+    for (x, y) in a.to_array().iter().zip(b.to_array()) {
+        if (x - y).abs() >= channel_tolerance * y {
+            return Err(format!("channel {x} vs {y} (means {a:?} vs {b:?})"));
+        }
+    }
+    for (i, (p, r)) in block_means(image).iter().zip(block_means(reference)).enumerate() {
+        if (p - r).abs() >= block_tolerance * r + block_floor {
+            return Err(format!("block {i}: {p} vs {r}"));
+        }
+    }
+    Ok(())
+}
+
+/// Asserts `image` matches `reference` ([`matches_reference`]).
 pub fn assert_matches_reference(
     label: &str,
     image: &LinearImage,
@@ -195,13 +226,26 @@ pub fn assert_matches_reference(
     block_floor: f64,
 ) {
     assert_finite_non_negative(image);
-    let (a, b) = (image.mean(), reference.mean());
-    eprintln!("{label}: {a:?} against the reference {b:?}");
-    for (x, y) in a.to_array().iter().zip(b.to_array()) {
-        assert!((x - y).abs() < channel_tolerance * y, "{label}: channel {x} vs {y}");
+    eprintln!("{label}: {:?} against the reference {:?}", image.mean(), reference.mean());
+    if let Err(e) = matches_reference(image, reference, channel_tolerance, block_tolerance, block_floor) {
+        panic!("{label}: {e}");
     }
-    for (i, (p, r)) in block_means(image).iter().zip(block_means(reference)).enumerate() {
-        assert!((p - r).abs() < block_tolerance * r + block_floor, "{label}: block {i}: {p} vs {r}");
+}
+
+/// The negative control of [`assert_matches_reference`]: a deliberately broken variant's
+/// `image` must fail the same tolerances, or they could not tell a broken technique from a
+/// working one.
+pub fn assert_rejected_by_reference(
+    label: &str,
+    image: &LinearImage,
+    reference: &LinearImage,
+    channel_tolerance: f32,
+    block_tolerance: f64,
+    block_floor: f64,
+) {
+    match matches_reference(image, reference, channel_tolerance, block_tolerance, block_floor) {
+        Ok(()) => panic!("{label}: the broken variant passes the tolerances ({:?} vs {:?})", image.mean(), reference.mean()),
+        Err(e) => eprintln!("{label} (negative control) fails as it must: {e}"),
     }
 }
 

@@ -34,10 +34,21 @@ impl PhotonRow {
         }
     }
 
-    /// Bytes per photon: position 12, incoming 12, object 4, triangle 4, power 12. The paper's
+    /// Heap bytes the row holds (position, incoming, object, triangle, power). The paper's
     /// photon is 32 bytes (no triangle, a radius instead); the triangle buys robust ray offsets
     /// when a path is retraced from a stored photon, and the radius is global here.
-    pub const PHOTON_BYTES: usize = 44;
+    fn heap_bytes(&self) -> u64 {
+        heap_bytes(&self.position)
+            + heap_bytes(&self.incoming)
+            + heap_bytes(&self.object)
+            + heap_bytes(&self.prim)
+            + heap_bytes(&self.power)
+    }
+}
+
+/// Bytes a vector's allocation holds (its capacity, not its length).
+fn heap_bytes<T>(v: &Vec<T>) -> u64 {
+    (v.capacity() * std::mem::size_of::<T>()) as u64
 }
 
 /// The 32-bit path word of the paper's §4: distribution-map cell (22 bits), segment count (4),
@@ -158,14 +169,14 @@ impl PathStore {
         }
     }
 
+    /// What the store's allocations hold, measured from the vectors themselves.
     pub fn memory(&self) -> StoreMemory {
-        let n = self.paths as u64;
         StoreMemory {
-            photon_map: n * self.max_photons as u64 * PhotonRow::PHOTON_BYTES as u64,
-            path_words: n * 4 + n * 2,
-            origins: self.origin.as_ref().map_or(0, |o| o.len() as u64 * 12),
-            segment0_and_escape: n * (12 + 12 + 12),
-            generations: n * 4,
+            photon_map: self.rows.iter().map(PhotonRow::heap_bytes).sum(),
+            path_words: heap_bytes(&self.word) + heap_bytes(&self.light),
+            origins: self.origin.as_ref().map_or(0, heap_bytes),
+            segment0_and_escape: heap_bytes(&self.emit_dir) + heap_bytes(&self.emit_power) + heap_bytes(&self.escape),
+            generations: heap_bytes(&self.generation),
             distribution_maps: 0,
             light_slots: 0,
         }
@@ -193,10 +204,13 @@ mod tests {
     }
 
     #[test]
-    fn memory_matches_the_layout() {
-        let s = PathStore::new(1000, 7, false);
-        assert_eq!(s.memory().photon_map, 1000 * 7 * 44);
-        assert_eq!(s.memory().origins, 0);
-        assert_eq!(PathStore::new(10, 2, true).memory().origins, 120);
+    fn memory_grows_with_paths_and_bounces_and_origins_only_when_asked() {
+        let base = PathStore::new(1000, 7, false).memory();
+        assert_eq!(PathStore::new(2000, 7, false).memory().photon_map, 2 * base.photon_map);
+        assert_eq!(PathStore::new(1000, 14, false).memory().photon_map, 2 * base.photon_map);
+        assert_eq!(PathStore::new(1000, 14, false).memory().path_words, base.path_words);
+        assert_eq!(base.origins, 0);
+        let with = PathStore::new(1000, 7, true).memory();
+        assert!(with.origins > 0 && with.total() == base.total() + with.origins);
     }
 }
