@@ -47,7 +47,10 @@ fn noop_edits(scene: &Scene) -> Vec<Edit> {
 /// A 1 mm move of the slab: a real change.
 fn nudge(scene: &Scene) -> Vec<Edit> {
     let t = scene.desc().objects[scene.object_index("slab").expect("slab")].transform;
-    vec![Edit::Object { name: "slab".into(), transform: Trs { translation: [t.translation[0] + 1e-3, t.translation[1], t.translation[2]], ..t } }]
+    vec![Edit::Object {
+        name: "slab".into(),
+        transform: Trs { translation: [t.translation[0] + 1e-3, t.translation[1], t.translation[2]], ..t },
+    }]
 }
 
 /// The stats without what may differ between twins: timings and the edit counts.
@@ -116,7 +119,12 @@ fn a_tick_of_no_op_edits_is_the_tick_of_a_twin_without_edits() {
 }
 
 /// Plays 41 frames (2 s at 20 fps) of `anim` in a fresh session, as the player does.
-fn play(pool: &rayon::ThreadPool, device: &relume::embree::Device, anim: &Animation, config: &TechniqueConfig) -> Vec<Frame> {
+fn play(
+    pool: &rayon::ThreadPool,
+    device: &relume::embree::Device,
+    anim: &Animation,
+    config: &TechniqueConfig,
+) -> Vec<Frame> {
     pool.install(|| {
         let mut s = Session::new(room(), config, 4, device).expect("session");
         (0..=40)
@@ -134,9 +142,7 @@ fn an_animation_hold_accumulates_and_converges() {
     // edits change nothing, so the film accumulates (one accumulation, growing spp) and the
     // error against a converged reference falls as 1/spp. The slab moves from t = 0 to 0.5 s,
     // then holds until 2 s.
-    let key = |time: f32, x: f32| {
-        serde_json::json!({"time": time, "transform": {"translation": [x, 0.35, 0.5], "scale": [0.35, 0.35, 0.35]}})
-    };
+    let key = |time: f32, x: f32| serde_json::json!({"time": time, "transform": {"translation": [x, 0.35, 0.5], "scale": [0.35, 0.35, 0.35]}});
     let lamp = serde_json::json!({"time": 0.0, "transform": {"translation": [0.0, 1.8, 0.2]}});
     let anim: Animation = serde_json::from_value(serde_json::json!({
         "duration": 2.0,
@@ -153,7 +159,11 @@ fn an_animation_hold_accumulates_and_converges() {
         let frames = play(&pool, &device, &anim, &config);
         // From frame 10 (t = 0.5 s) on, the pose holds: one accumulation, spp growing each tick.
         let hold = &frames[10..];
-        assert!(hold.iter().all(|f| f.accumulation_id == hold[0].accumulation_id), "{}: the hold reset the film", config.id());
+        assert!(
+            hold.iter().all(|f| f.accumulation_id == hold[0].accumulation_id),
+            "{}: the hold reset the film",
+            config.id()
+        );
         assert!(hold.windows(2).all(|w| w[1].spp > w[0].spp), "{}: the hold added no samples", config.id());
         assert!(hold[1..].iter().all(|f| f.stats.edits_unchanged == f.stats.edits_received), "{}", config.id());
         assert!(frames[9].accumulation_id != frames[10].accumulation_id, "{}: the move itself was missed", config.id());

@@ -42,7 +42,8 @@ fn cornell_box_matches_the_path_reference() {
         2,
     )
     .image;
-    let photons = render(scene.clone(), TechniqueConfig::PhotonReuse(config(300_000, ReuseMode::Naive)), 3, 24, 2).image;
+    let photons =
+        render(scene.clone(), TechniqueConfig::PhotonReuse(config(300_000, ReuseMode::Naive)), 3, 24, 2).image;
     assert_matches_reference("cornell", &photons, &reference, 0.03, 0.10, 0.002);
     // Negative control: photon paths of one photon (B = 1, no multiple bounces) fail the same
     // bounds.

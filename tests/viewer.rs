@@ -121,9 +121,14 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
     // The session's scene (not a frame of another tick, whose noise differs anyway) shows the
     // bunny somewhere else than the bundled scene puts it.
     let id = after[0].as_str().expect("the viewer's session id");
-    let scene: Value = server.http.get(server.url(&format!("/v1/sessions/{id}/scene"))).send().await.unwrap().json().await.unwrap();
-    let bundled: Value = serde_json::from_str(&std::fs::read_to_string(common::scenes_dir().join("bunnies-1.json")).unwrap()).unwrap();
-    let bunny = |s: &Value| s["objects"].as_array().unwrap().iter().find(|o| o["name"] == "bunny-1").unwrap()["transform"]["translation"].clone();
+    let scene: Value =
+        server.http.get(server.url(&format!("/v1/sessions/{id}/scene"))).send().await.unwrap().json().await.unwrap();
+    let bundled: Value =
+        serde_json::from_str(&std::fs::read_to_string(common::scenes_dir().join("bunnies-1.json")).unwrap()).unwrap();
+    let bunny = |s: &Value| {
+        s["objects"].as_array().unwrap().iter().find(|o| o["name"] == "bunny-1").unwrap()["transform"]["translation"]
+            .clone()
+    };
     assert_ne!(bunny(&scene), bunny(&bundled), "the drag did not move the bunny");
     // The stats panel shows the tick's numbers.
     let stats_rows = c.execute("return document.querySelectorAll('#stats tr').length", vec![]).await.unwrap();

@@ -115,6 +115,9 @@ impl Device {
 
 impl std::fmt::Debug for Device {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Device").field("isa", &self.inner.isa).field("holders", &Arc::strong_count(&self.inner)).finish()
+        f.debug_struct("Device")
+            .field("isa", &self.inner.isa)
+            .field("holders", &Arc::strong_count(&self.inner))
+            .finish()
     }
 }

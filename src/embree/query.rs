@@ -166,7 +166,16 @@ macro_rules! packet_queries {
 }
 
 packet_queries!(8, ValidMask8, RTCRayHit8, RTCRay8, intersect8, occluded8, version::intersect8, version::occluded8);
-packet_queries!(16, ValidMask16, RTCRayHit16, RTCRay16, intersect16, occluded16, version::intersect16, version::occluded16);
+packet_queries!(
+    16,
+    ValidMask16,
+    RTCRayHit16,
+    RTCRay16,
+    intersect16,
+    occluded16,
+    version::intersect16,
+    version::occluded16
+);
 
 impl CommittedScene {
     /// Closest hits for any number of lanes: 16 and 8 lanes go to Embree's packet kernels, any

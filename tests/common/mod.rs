@@ -26,7 +26,14 @@ pub fn render(scene: Scene, config: TechniqueConfig, seed: u64, ticks: u32, thre
 }
 
 /// As [`render`], on the given Embree device.
-pub fn render_on(device: &Device, scene: Scene, config: TechniqueConfig, seed: u64, ticks: u32, threads: usize) -> Frame {
+pub fn render_on(
+    device: &Device,
+    scene: Scene,
+    config: TechniqueConfig,
+    seed: u64,
+    ticks: u32,
+    threads: usize,
+) -> Frame {
     let pool = thread_pool(threads).expect("thread pool");
     pool.install(|| {
         let mut session = Session::new(scene, &config, seed, device).expect("session");
@@ -244,7 +251,9 @@ pub fn assert_rejected_by_reference(
     block_floor: f64,
 ) {
     match matches_reference(image, reference, channel_tolerance, block_tolerance, block_floor) {
-        Ok(()) => panic!("{label}: the broken variant passes the tolerances ({:?} vs {:?})", image.mean(), reference.mean()),
+        Ok(()) => {
+            panic!("{label}: the broken variant passes the tolerances ({:?} vs {:?})", image.mean(), reference.mean())
+        }
         Err(e) => eprintln!("{label} (negative control) fails as it must: {e}"),
     }
 }

@@ -13,7 +13,6 @@ pub async fn open(url: &str) -> Socket {
 
 pub type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
-
 pub async fn send(ws: &mut Socket, v: Value) {
     ws.send(Message::Text(v.to_string().into())).await.unwrap();
 }
@@ -47,4 +46,3 @@ pub async fn next_frame(ws: &mut Socket) -> (FrameHeader, image::DynamicImage) {
         }
     }
 }
-
