@@ -29,6 +29,9 @@ pub struct FrameFigures {
     pub paths_retraced: u64,
     pub tick_ms: f64,
     pub stages_ms: BTreeMap<&'static str, f64>,
+    /// Photons the grid took out and put in (every photon when it was rebuilt).
+    pub grid_photons_changed: u64,
+    pub grid_rebuilt: bool,
 }
 
 #[derive(Debug, Serialize)]
@@ -39,6 +42,9 @@ pub struct Summary {
     pub tick_ms_p95: f64,
     pub verify_ms_median: f64,
     pub trace_plus_verify_ms_median: f64,
+    pub grid_ms_median: f64,
+    pub render_ms_median: f64,
+    pub grid_photons_changed_median: f64,
     pub memory_bytes: u64,
 }
 
@@ -102,6 +108,8 @@ pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
                 paths_retraced: s.partly_retraced + s.fully_retraced,
                 tick_ms: t.total_ms,
                 stages_ms: stages,
+                grid_photons_changed: s.grid_added + s.grid_removed,
+                grid_rebuilt: s.grid_rebuilt,
             });
             bar.inc(1);
             Ok(())
@@ -120,6 +128,9 @@ pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
                 &col(&|f| verify_ms(f) + f.stages_ms["fill"] + f.stages_ms["trace"]),
                 0.5,
             ),
+            grid_ms_median: quantile(&col(&|f| f.stages_ms["grid"]), 0.5),
+            render_ms_median: quantile(&col(&|f| f.stages_ms["render"]), 0.5),
+            grid_photons_changed_median: quantile(&col(&|f| f.grid_photons_changed as f64), 0.5),
             memory_bytes: memory,
         };
         reports.push(ModeReport { mode: name, initial, frames: figures, summary });
@@ -141,11 +152,13 @@ pub fn print_table(r: &ReuseReport) {
         "relume bench reuse: {} with {} at {}x{}, {} paths, {} threads",
         r.scene, r.animation, r.width, r.height, r.paths, r.threads
     );
-    println!("  mode    rays/tick (median, p95)   tick ms (median, p95)   verify ms   trace+verify ms   memory MiB");
+    println!(
+        "  mode    rays/tick (median, p95)   tick ms (median, p95)   verify ms   trace+verify ms   grid ms   grid photons changed   render ms   memory MiB"
+    );
     for m in &r.modes {
         let s = &m.summary;
         println!(
-            "  {:<7} {:>10.0} {:>12.0} {:>12.1} {:>10.1} {:>11.2} {:>15.1} {:>12.1}",
+            "  {:<7} {:>10.0} {:>12.0} {:>12.1} {:>10.1} {:>11.2} {:>15.1} {:>9.1} {:>22.0} {:>11.1} {:>12.1}",
             m.mode,
             s.rays_per_tick_median,
             s.rays_per_tick_p95,
@@ -153,6 +166,9 @@ pub fn print_table(r: &ReuseReport) {
             s.tick_ms_p95,
             s.verify_ms_median,
             s.trace_plus_verify_ms_median,
+            s.grid_ms_median,
+            s.grid_photons_changed_median,
+            s.render_ms_median,
             s.memory_bytes as f64 / 1048576.0
         );
     }
@@ -160,8 +176,9 @@ pub fn print_table(r: &ReuseReport) {
     for m in r.modes.iter().filter(|m| m.mode != "off") {
         let (o, n) = (&off.summary, &m.summary);
         println!(
-            "  {} vs off: {:.1}x fewer rays per tick, {:.1}x less trace+verify time, verification {:.1}% of the off tick",
+            "  {} vs off: whole tick {:.2}x faster, {:.1}x fewer rays per tick, {:.1}x less trace+verify time, verification {:.1}% of the off tick",
             m.mode,
+            o.tick_ms_median / n.tick_ms_median.max(1e-9),
             o.rays_per_tick_median / n.rays_per_tick_median.max(1.0),
             o.trace_plus_verify_ms_median / n.trace_plus_verify_ms_median.max(1e-9),
             100.0 * n.verify_ms_median / o.tick_ms_median.max(1e-9)

@@ -116,8 +116,9 @@ pub fn update_origin(
     (Moved::Kept { origin, dir, scale, cell, retrace }, 1)
 }
 
-/// Writes a kept path's new origin into the store.
-pub fn apply_moved(store: &mut PathStore, path: usize, origin: Vec3, dir: Vec3, scale: Rgb, cell: u32) {
+/// Writes a kept path's new origin into the store. Returns whether its photons changed (their
+/// flux is rescaled unless `scale` is 1); their positions never do.
+pub fn apply_moved(store: &mut PathStore, path: usize, origin: Vec3, dir: Vec3, scale: Rgb, cell: u32) -> bool {
     if let Some(origins) = &mut store.origin {
         origins[path] = origin;
     }
@@ -126,12 +127,14 @@ pub fn apply_moved(store: &mut PathStore, path: usize, origin: Vec3, dir: Vec3, 
     if store.word[path].photons() > 0 {
         store.rows[0].incoming[path] = dir;
     }
-    if scale != Rgb::WHITE {
-        store.emit_power[path] *= scale;
-        for row in store.rows.iter_mut().take(store.word[path].photons() as usize) {
-            row.power[path] *= scale;
-        }
+    if scale == Rgb::WHITE {
+        return false;
     }
+    store.emit_power[path] *= scale;
+    for row in store.rows.iter_mut().take(store.word[path].photons() as usize) {
+        row.power[path] *= scale;
+    }
+    true
 }
 
 /// What balancing one light's map did.

@@ -20,8 +20,10 @@
 //!    path is kept while the energy reflected at each new vertex stays within T of the stored.
 //! 4. **Prune and fill** (`lights.rs`, eq. 1) for lights that moved or whose map has not yet
 //!    settled, then trace fills and retraces in parallel.
-//! 5. Rebuild the photon grid if any photon changed, with the radius fixed at the first tick,
-//!    and render (`gather.rs`): camera rays through specular chains to the first diffuse hit;
+//! 5. Update the photon grid in place for the paths whose photons changed (`grid.rs`: cost in
+//!    proportion to their photons; rebuilt only on the first tick, in `off` mode, or when more
+//!    than a quarter of the paths changed), with the radius fixed at the first tick, and render
+//!    (`gather.rs`): camera rays through specular chains to the first diffuse hit;
 //!    direct light by next-event estimation, indirect light by a density estimate over photons
 //!    from the second bounce on. The film accumulates while nothing changes.
 //!
@@ -59,6 +61,7 @@ mod config;
 mod distribution;
 mod error;
 mod gather;
+mod grid;
 mod lights;
 mod stats;
 mod store;
@@ -67,7 +70,7 @@ mod verify;
 
 pub use config::{PhotonReuseConfig, ReuseMode, MAX_PATHS};
 pub use distribution::{DistributionMap, MapResolution, MAX_CELLS};
-pub use gather::PhotonGrid;
+pub use grid::{GridUpdate, PhotonGrid};
 pub use stats::PhotonStats;
 pub use store::{PathStore, PathWord, StoreMemory};
 
@@ -142,13 +145,20 @@ impl PhotonReuse {
         }
         let all: Vec<(usize, Retrace)> =
             if scene.light_selection.is_some() { (0..n).map(|i| (i, Retrace::Emit)).collect() } else { Vec::new() };
-        self.retrace(ctx, &mut store, &all);
+        self.retrace(ctx, &mut store, &all, &mut Vec::new());
         store
     }
 
     /// Traces the given retraces in parallel, in chunks that bound temporary memory; fills and
     /// the rest are timed and counted apart.
-    fn retrace(&mut self, ctx: &RenderContext, store: &mut PathStore, work: &[(usize, Retrace)]) {
+    fn retrace(
+        &mut self,
+        ctx: &RenderContext,
+        store: &mut PathStore,
+        work: &[(usize, Retrace)],
+        touched: &mut Vec<usize>,
+    ) {
+        touched.extend(work.iter().map(|&(path, _)| path));
         // Mark first (§4's replace flag and segment), so what is pending is visible in the word.
         for &(path, how) in work {
             store.word[path] = store.word[path].retrace(how.first_segment());
@@ -187,8 +197,15 @@ impl PhotonReuse {
         self.pending.partly_retraced += work.len() as u64 - fully;
     }
 
-    /// Steps 2–4 of a later tick. Returns whether any stored photon changed.
-    fn update_paths(&mut self, ctx: &RenderContext, store: &mut PathStore, delta: &SceneDelta) -> bool {
+    /// Steps 2–4 of a later tick. Returns whether any stored photon changed, and adds every
+    /// path it changed to `touched`.
+    fn update_paths(
+        &mut self,
+        ctx: &RenderContext,
+        store: &mut PathStore,
+        delta: &SceneDelta,
+        touched: &mut Vec<usize>,
+    ) -> bool {
         let scene = ctx.scene;
         let lights = scene.lights.len();
         let mut reemit = vec![false; lights];
@@ -211,7 +228,7 @@ impl PhotonReuse {
                 return false;
             }
             let all: Vec<(usize, Retrace)> = (0..store.paths).map(|i| (i, Retrace::Emit)).collect();
-            self.retrace(ctx, store, &all);
+            self.retrace(ctx, store, &all, touched);
             return true;
         }
         let mut plan: Vec<Option<Retrace>> = vec![None; store.paths];
@@ -230,7 +247,7 @@ impl PhotonReuse {
                 continue;
             }
             if let Some(old) = moved_from[l] {
-                valid_of_light[l] = self.move_light(ctx, store, l, old, &mut plan, &mut standing);
+                valid_of_light[l] = self.move_light(ctx, store, l, old, &mut plan, &mut standing, touched);
                 changed = true;
             } else if let Some(m) = self.maps[l].as_ref().filter(|m| !m.map.settled()) {
                 valid_of_light[l] = Some(m.slots.iter().map(|&s| !store.emit_power[s as usize].is_black()).collect());
@@ -241,7 +258,7 @@ impl PhotonReuse {
         // Dynamic occlusions against moved surfaces and edited materials.
         let t = Instant::now();
         if !delta.moved.is_empty() || !delta.materials.is_empty() {
-            changed |= self.verify(ctx, store, delta, &mut plan, &standing);
+            changed |= self.verify(ctx, store, delta, &mut plan, &standing, touched);
         }
         self.pending.verify_ms = ms(t);
 
@@ -260,7 +277,7 @@ impl PhotonReuse {
 
         let work: Vec<(usize, Retrace)> = plan.into_iter().enumerate().filter_map(|(i, r)| r.map(|r| (i, r))).collect();
         if !work.is_empty() {
-            self.retrace(ctx, store, &work);
+            self.retrace(ctx, store, &work, touched);
             changed = true;
         }
         changed
@@ -276,6 +293,7 @@ impl PhotonReuse {
         old: Affine3A,
         plan: &mut [Option<Retrace>],
         standing: &mut [Standing],
+        touched: &mut Vec<usize>,
     ) -> Option<Vec<bool>> {
         let frame = EmissionFrame::of(ctx.scene, l, self.config.distribution_map)?;
         let mapped = match self.maps[l].take() {
@@ -301,7 +319,9 @@ impl PhotonReuse {
             self.pending.origin_rays += rays;
             match outcome {
                 Moved::Kept { origin, dir, scale, cell, retrace } => {
-                    lights::apply_moved(store, slot, origin, dir, scale, cell);
+                    if lights::apply_moved(store, slot, origin, dir, scale, cell) {
+                        touched.push(slot);
+                    }
                     valid.push(true);
                     plan[slot] = retrace;
                     standing[slot] = if retrace.is_some() { Standing::Decided } else { Standing::FirstVerified };
@@ -324,6 +344,7 @@ impl PhotonReuse {
         delta: &SceneDelta,
         plan: &mut [Option<Retrace>],
         standing: &[Standing],
+        touched: &mut Vec<usize>,
     ) -> bool {
         let scene = ctx.scene;
         let mut boxes = Vec::new();
@@ -382,6 +403,7 @@ impl PhotonReuse {
         let moved_photons = !decided.is_empty();
         for (i, c) in decided {
             plan[i] = error::apply(store, i, c);
+            touched.push(i);
         }
         moved_photons
     }
@@ -406,6 +428,24 @@ impl PhotonReuse {
         };
         self.grid = if radius == first.radius { first } else { PhotonGrid::build(scene, store, radius) };
         self.pending.grid_ms = ms(t);
+        self.pending.grid_rebuilt = true;
+        self.pending.grid_added = self.grid.len() as u64;
+    }
+
+    /// Brings the grid up to date with the paths this tick changed: in place, unless so many
+    /// changed that a rebuild is cheaper (`bench reuse` measures both; at a quarter of the paths
+    /// the update's per-photon inserts cost about what a parallel rebuild does).
+    fn refresh_grid(&mut self, scene: &Scene, store: &PathStore, mut touched: Vec<usize>) {
+        if self.grid.radius <= 0.0 || touched.len() * 4 > store.paths {
+            return self.rebuild_grid(scene, store);
+        }
+        let t = Instant::now();
+        touched.par_sort_unstable();
+        touched.dedup();
+        let u = self.grid.update(scene, store, &touched);
+        self.pending.grid_removed = u.removed;
+        self.pending.grid_added = u.added;
+        self.pending.grid_ms = ms(t);
     }
 }
 
@@ -416,16 +456,21 @@ impl Technique for PhotonReuse {
 
     fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
         self.pending = PhotonStats::default();
-        let (store, changed) = match self.store.take() {
-            None => (self.build(ctx), true),
-            Some(mut store) => {
-                let changed = self.update_paths(ctx, &mut store, delta);
-                (store, changed)
+        match self.store.take() {
+            None => {
+                let store = self.build(ctx);
+                self.rebuild_grid(ctx.scene, &store);
+                self.store = Some(store);
             }
-        };
-        if changed {
-            self.rebuild_grid(ctx.scene, &store);
+            Some(mut store) => {
+                let mut touched = Vec::new();
+                if self.update_paths(ctx, &mut store, delta, &mut touched) {
+                    self.refresh_grid(ctx.scene, &store, touched);
+                }
+                self.store = Some(store);
+            }
         }
+        let Some(store) = self.store.as_ref() else { return Ok(()) };
         let p = &mut self.pending;
         p.paths = store.paths as u64;
         p.untouched = p.paths.saturating_sub(p.partly_retraced + p.fully_retraced);
@@ -442,7 +487,6 @@ impl Technique for PhotonReuse {
             p.distribution_chi2 = chi2;
             p.distribution_cells = cells;
         }
-        self.store = Some(store);
         if !delta.is_empty() {
             self.passes = 0;
         }

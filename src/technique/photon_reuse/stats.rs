@@ -43,6 +43,12 @@ pub struct PhotonStats {
     // Gather and distribution maps.
     pub radius: f32,
     pub grid_photons: u64,
+    /// Photons the grid update took out and put in (a rebuild counts every photon as put in).
+    pub grid_removed: u64,
+    pub grid_added: u64,
+    /// The grid was built from scratch this tick (the first tick, `off` mode, or more than a
+    /// quarter of the paths changed) rather than updated in place.
+    pub grid_rebuilt: bool,
     /// Total flux of the gathered photons (W per channel): the indirect light in the map.
     pub grid_power: [f64; 3],
     /// Largest χ² of DM_C against DM_T over the lights with a map, after this tick's fill.
