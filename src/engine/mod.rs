@@ -67,7 +67,11 @@ pub struct Session {
     film: Film,
     seed: u64,
     tick: u64,
+    /// Queued edits, already coalesced (latest per target), so the queue never holds more
+    /// entries than the scene has targets.
     pending: Vec<Edit>,
+    /// Edits received into `pending` since the last tick, before coalescing.
+    pending_received: usize,
 }
 
 impl Session {
@@ -75,7 +79,17 @@ impl Session {
         let technique = technique::build(config, &scene)?;
         let accel = SceneAccel::build(device, &scene)?;
         let film = Film::new(scene.camera.width, scene.camera.height);
-        Ok(Session { scene, accel, technique, config: config.clone(), film, seed, tick: 0, pending: Vec::new() })
+        Ok(Session {
+            scene,
+            accel,
+            technique,
+            config: config.clone(),
+            film,
+            seed,
+            tick: 0,
+            pending: Vec::new(),
+            pending_received: 0,
+        })
     }
 
     pub fn scene(&self) -> &Scene {
@@ -99,14 +113,22 @@ impl Session {
         &self.film
     }
 
-    /// Validates edits against the current scene and queues them for the next tick. A rejected
-    /// batch queues nothing.
+    /// Validates edits against the current scene with the pending edits merged in (two
+    /// batches each valid alone, such as a camera position and a look-at at that position,
+    /// may not be valid together), and queues them for the next tick, coalesced. A rejected
+    /// batch queues nothing, so an accepted edit never fails a tick.
     pub fn queue_edits(&mut self, batch: Vec<Edit>) -> Result<(), SceneError> {
-        edits::validate(&self.scene, &batch)?;
-        self.pending.extend(batch);
+        let received = batch.len();
+        let mut merged = self.pending.clone();
+        merged.extend(batch);
+        edits::validate(&self.scene, &merged)?;
+        let (kept, _) = edits::coalesce(merged);
+        self.pending = kept.into_iter().map(|(_, e)| e).collect();
+        self.pending_received += received;
         Ok(())
     }
 
+    /// Distinct targets with a queued edit.
     pub fn pending_edits(&self) -> usize {
         self.pending.len()
     }
@@ -118,9 +140,13 @@ impl Session {
 
         // Drain the queue and apply it to the model.
         let batch = std::mem::take(&mut self.pending);
+        let received = std::mem::take(&mut self.pending_received);
         times.drain_ms = ms(start);
         let t = Instant::now();
-        let delta: SceneDelta = edits::apply(&mut self.scene, batch)?;
+        let kept = batch.len();
+        let mut delta: SceneDelta = edits::apply(&mut self.scene, batch)?;
+        delta.received = received;
+        delta.coalesced = received - kept;
         times.apply_ms = ms(t);
 
         // Commit only moved instances to Embree.

@@ -14,6 +14,9 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, RwLock};
 use std::time::Duration;
 
+/// The slowest server-driven tick rate: one tick per 100 s.
+pub const MIN_TICK_HZ: f32 = 0.01;
+
 /// Limits on what clients may ask for. Each rejection answers 413 (too large) or 422/429.
 #[derive(Clone, Debug)]
 pub struct Limits {
@@ -218,8 +221,11 @@ impl AppState {
             )));
         }
         if let Some(hz) = req.tick_hz {
-            if !(hz.is_finite() && hz > 0.0 && hz <= limits.max_tick_hz) {
-                return Err(ApiError::invalid(format!("tick_hz: must lie in (0, {}]", limits.max_tick_hz)));
+            if !(hz.is_finite() && (MIN_TICK_HZ..=limits.max_tick_hz).contains(&hz)) {
+                return Err(ApiError::invalid(format!(
+                    "tick_hz: must lie in [{MIN_TICK_HZ}, {}] ticks per second",
+                    limits.max_tick_hz
+                )));
             }
         }
 

@@ -24,6 +24,9 @@ use tokio::sync::{oneshot, watch};
 
 /// How many ticks' stats a session keeps.
 pub const STATS_HISTORY: usize = 256;
+/// The longest period between scheduled ticks (`tick_hz` is validated to at least 0.01).
+const MAX_PERIOD: Duration = Duration::from_secs(100);
+
 /// Tick rate while an animation plays in a session without `tick_hz`.
 pub const DEFAULT_PLAY_HZ: f32 = 30.0;
 
@@ -133,13 +136,7 @@ impl Worker {
                 return Ok(stats);
             }
             Ok(Err(e)) => format!("tick failed: {e}"),
-            Err(panic) => {
-                let msg = panic
-                    .downcast_ref::<&str>()
-                    .map(|s| s.to_string())
-                    .or_else(|| panic.downcast_ref::<String>().cloned());
-                format!("panic in the technique: {}", msg.unwrap_or_else(|| "(no message)".into()))
-            }
+            Err(panic) => format!("panic in the technique: {}", panic_message(&*panic)),
         };
         tracing::error!(target: "relume::server", "session failed: {reason}");
         self.metrics.sessions_failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -216,8 +213,33 @@ impl SessionHandle {
     }
 }
 
-/// The worker loop: serve commands; tick on schedule while `tick_hz` is set or an animation plays.
-fn run(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
+/// The worker thread: the command loop under `catch_unwind`, so a panic anywhere in it (not
+/// only inside a tick) marks the session failed, with its reason, instead of leaving it
+/// "running" with no thread behind it.
+fn run(w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
+    let failure = w.failure.clone();
+    let metrics = w.metrics.clone();
+    if let Err(panic) = std::panic::catch_unwind(AssertUnwindSafe(|| serve(w, rx, tick_hz))) {
+        let reason = format!("panic in the session worker: {}", panic_message(&*panic));
+        tracing::error!(target: "relume::server", "session failed: {reason}");
+        metrics.sessions_failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if let Ok(mut f) = failure.lock() {
+            *f = Some(reason);
+        }
+    }
+}
+
+fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    panic
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| panic.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "(no message)".into())
+}
+
+/// The command loop: serve commands; tick on schedule while `tick_hz` is set or an animation
+/// plays.
+fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
     let mut playing: Option<(Box<Animation>, f32, Instant)> = None;
     let mut next_tick = tick_hz.map(|_| Instant::now());
     loop {
@@ -271,7 +293,7 @@ fn run(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
                     continue;
                 }
                 let hz = tick_hz.unwrap_or(DEFAULT_PLAY_HZ);
-                let period = Duration::from_secs_f32(1.0 / hz);
+                let period = Duration::try_from_secs_f32(1.0 / hz).unwrap_or(MAX_PERIOD);
                 let now = Instant::now();
                 next_tick = next_tick.map(|at| if at + period > now { at + period } else { now + period });
             }

@@ -1,0 +1,83 @@
+//! Hazards from hostile and sloppy clients, each against a real server on 127.0.0.1:0. Each
+//! test names the hazard it guards; each failed before its fix.
+mod common;
+use common::server::TestServer;
+use relume::server::Limits;
+use serde_json::{json, Value};
+
+fn small(scene: &str) -> Value {
+    json!({"scene": scene, "width": 16, "height": 16})
+}
+
+async fn post(s: &TestServer, path: &str, body: Value) -> (u16, Value) {
+    let r = s.http.post(s.url(path)).json(&body).send().await.expect("request");
+    let status = r.status().as_u16();
+    (status, r.json().await.unwrap_or(Value::Null))
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_tick_rate_that_would_overflow_the_period_is_refused() {
+    // Hazard: tick_hz = 1e-30 was accepted, and 1/hz overflowed a Duration inside the worker
+    // loop: a panic outside the tick's catch_unwind, the session "running" with no thread.
+    let s = TestServer::start(None, Limits::default()).await;
+    for hz in [1e-30, 0.001, 0.0, -1.0] {
+        let (status, body) =
+            post(&s, "/v1/sessions", json!({"scene": "cornell-box", "width": 16, "height": 16, "tick_hz": hz})).await;
+        assert_eq!(status, 422, "tick_hz {hz}: {body}");
+        assert!(body["detail"].as_str().unwrap_or_default().contains("tick_hz"), "{body}");
+    }
+    assert_eq!(s.state.session_count(), 0);
+    let (status, body) =
+        post(&s, "/v1/sessions", json!({"scene": "cornell-box", "width": 16, "height": 16, "tick_hz": 0.01})).await;
+    assert_eq!(status, 201, "{body}");
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn batches_valid_alone_but_not_together_are_refused_at_queue_time() {
+    // Hazard: `{camera, position: X}` then `{camera, look_at: X}` were each valid, merged at
+    // the tick into a camera looking at itself, and failed the session (409 from then on).
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(small("cornell-box")).await;
+    let edits = format!("/v1/sessions/{id}/edits");
+    let (status, body) = post(&s, &edits, json!({"edits": [{"target": "camera", "position": [278, 273, -300]}]})).await;
+    assert_eq!(status, 202, "{body}");
+    let (status, body) = post(&s, &edits, json!({"edits": [{"target": "camera", "look_at": [278, 273, -300]}]})).await;
+    assert_eq!(status, 422, "{body}");
+    assert!(body["detail"].as_str().unwrap_or_default().contains("camera.look_at"), "{body}");
+    // The accepted edit applies and the session keeps working.
+    let (status, body) = post(&s, &format!("/v1/sessions/{id}/tick"), json!({})).await;
+    assert_eq!(status, 200, "{body}");
+    let (status, _) = post(&s, &format!("/v1/sessions/{id}/tick"), json!({})).await;
+    assert_eq!(status, 200);
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_pending_queue_holds_one_entry_per_target() {
+    // Hazard: accepted batches piled up while nothing ticked. They are coalesced at queue time,
+    // so the queue never holds more entries than there are targets, and the tick still reports
+    // every edit received and how many were coalesced.
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(small("bunnies-1")).await;
+    let edits = format!("/v1/sessions/{id}/edits");
+    let batches = 300;
+    let mut pending = 0;
+    for i in 0..batches {
+        let bunny = json!({"target": "object", "name": "bunny-1", "transform": {"translation": [200 + i, 0, 250], "scale": [120, 120, 120]}});
+        let camera = json!({"target": "camera", "position": [278, 273, -800 + i as i64]});
+        let (status, body) = post(&s, &edits, json!({"edits": [bunny, camera]})).await;
+        assert_eq!(status, 202, "{body}");
+        pending = body["pending"].as_u64().unwrap_or(u64::MAX);
+    }
+    assert_eq!(pending, 2, "two targets, so two queued entries");
+    let (status, body) = post(&s, &format!("/v1/sessions/{id}/tick"), json!({})).await;
+    assert_eq!(status, 200, "{body}");
+    let stats = &body["stats"];
+    assert_eq!(
+        (stats["edits_received"].as_u64(), stats["edits_coalesced"].as_u64()),
+        (Some(2 * batches), Some(2 * batches - 2))
+    );
+    assert_eq!(stats["moved_surfaces"], 1);
+    s.shutdown().await.unwrap();
+}
