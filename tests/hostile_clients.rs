@@ -81,3 +81,33 @@ async fn the_pending_queue_holds_one_entry_per_target() {
     assert_eq!(stats["moved_surfaces"], 1);
     s.shutdown().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bodies_that_are_not_json_get_415() {
+    // Hazard: any web page can POST `text/plain` to 127.0.0.1 without a CORS preflight. Only
+    // `application/json` bodies are read; the rest get a 415 with the JSON error body.
+    let s = TestServer::start(None, Limits::default()).await;
+    let body = json!({"scene": "cornell-box", "width": 16, "height": 16}).to_string();
+    for content_type in [None, Some("text/plain"), Some("application/x-www-form-urlencoded")] {
+        let mut req = s.http.post(s.url("/v1/sessions")).body(body.clone());
+        if let Some(ct) = content_type {
+            req = req.header("content-type", ct);
+        }
+        let r = req.send().await.expect("request");
+        assert_eq!(r.status(), 415, "{content_type:?}");
+        let v: Value = r.json().await.expect("a JSON error body");
+        assert_eq!(v["error"], "unsupported_media_type");
+        assert!(v["detail"].as_str().unwrap_or_default().contains("content-type"), "{v}");
+    }
+    assert_eq!(s.state.session_count(), 0);
+    let r = s
+        .http
+        .post(s.url("/v1/sessions"))
+        .header("content-type", "application/json; charset=utf-8")
+        .body(body)
+        .send()
+        .await
+        .expect("request");
+    assert_eq!(r.status(), 201);
+    s.shutdown().await.unwrap();
+}

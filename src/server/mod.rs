@@ -30,36 +30,39 @@ use std::future::Future;
 use std::sync::Arc;
 use tower_http::timeout::TimeoutLayer;
 
-/// Rejects `/v1` requests without the configured bearer token (header, or `?token=` for
-/// browsers' WebSockets, which cannot set headers).
+/// Rejects `/v1` requests without the configured bearer token. The token comes in
+/// `Authorization: Bearer <token>` (the scheme in any case); `?token=` (percent-decoded) is
+/// accepted only on the GETs a browser opens without setting headers: the WebSocket and
+/// frames. Tokens are compared in constant time.
 async fn require_token(State(s): State<Shared>, req: Request, next: Next) -> Result<Response, ApiError> {
     if let Some(token) = &s.config.token {
+        let matches = |t: &[u8]| bool::from(subtle::ConstantTimeEq::ct_eq(t, token.as_bytes()));
         let header_ok = req
             .headers()
             .get(axum::http::header::AUTHORIZATION)
             .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.strip_prefix("Bearer "))
-            .is_some_and(|t| constant_time_eq(t.as_bytes(), token.as_bytes()));
-        let query_ok = req
-            .uri()
-            .query()
-            .into_iter()
-            .flat_map(|q| q.split('&'))
-            .filter_map(|kv| kv.strip_prefix("token="))
-            .any(|t| constant_time_eq(t.as_bytes(), token.as_bytes()));
+            .and_then(|v| v.trim().split_once(' '))
+            .is_some_and(|(scheme, t)| scheme.eq_ignore_ascii_case("bearer") && matches(t.trim().as_bytes()));
+        let path = req.uri().path();
+        let browser_get = req.method() == axum::http::Method::GET
+            && (path.ends_with("/ws") || path.rsplit('/').next().is_some_and(|f| f.starts_with("frame.")));
+        let query_ok = browser_get
+            && req
+                .uri()
+                .query()
+                .into_iter()
+                .flat_map(|q| q.split('&'))
+                .filter_map(|kv| kv.strip_prefix("token="))
+                .any(|t| matches(&percent_encoding::percent_decode_str(t).collect::<Vec<u8>>()));
         if !header_ok && !query_ok {
             return Err(ApiError::new(
                 StatusCode::UNAUTHORIZED,
                 "unauthorized",
-                "this server requires 'Authorization: Bearer <token>'",
+                "this server requires 'Authorization: Bearer <token>' (or ?token= on WebSocket and frame URLs)",
             ));
         }
     }
     Ok(next.run(req).await)
-}
-
-fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
 }
 
 /// Counts every 4xx/5xx answer by its `error` code for `/metrics`.

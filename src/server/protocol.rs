@@ -75,7 +75,8 @@ pub struct EditBatch {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct EditsAccepted {
     pub queued: usize,
-    /// Edits waiting for the next tick, this batch included.
+    /// Targets with an edit waiting for the next tick, this batch included (edits are
+    /// coalesced, latest per target, as they are queued).
     pub pending: usize,
 }
 
