@@ -111,3 +111,39 @@ async fn bodies_that_are_not_json_get_415() {
     assert_eq!(r.status(), 201);
     s.shutdown().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn sessions_are_listed_and_websocket_messages_share_the_body_limit() {
+    // `GET /v1/sessions` lists what the server holds (so a client or an operator can find and
+    // delete what it left behind); a WebSocket message larger than the HTTP body limit is
+    // refused like an HTTP body of that size would be (the library default was 64 MiB).
+    let limits = Limits { max_body_bytes: 64 << 10, ..Limits::default() };
+    let s = TestServer::start(None, limits).await;
+    let a = s.session(small("cornell-box")).await;
+    let b = s.session(small("cornell-box")).await;
+    let list: Value = s.http.get(s.url("/v1/sessions")).send().await.unwrap().json().await.unwrap();
+    let ids: Vec<&str> = list["sessions"].as_array().unwrap().iter().map(|v| v["id"].as_str().unwrap()).collect();
+    let mut expected = vec![a.as_str(), b.as_str()];
+    expected.sort();
+    assert_eq!(ids, expected);
+
+    use futures_util::{SinkExt, StreamExt};
+    let mut ws = common::ws::open(&s.ws_url(&format!("/v1/sessions/{a}/ws"))).await;
+    let big = format!("{{\"type\":\"tick\",\"pad\":\"{}\"}}", "x".repeat(128 << 10));
+    let _ = ws.send(tokio_tungstenite::tungstenite::Message::Text(big.into())).await;
+    // The server closes the socket instead of reading 128 KiB into memory.
+    let closed = tokio::time::timeout(std::time::Duration::from_secs(10), async {
+        loop {
+            match ws.next().await {
+                None | Some(Err(_)) | Some(Ok(tokio_tungstenite::tungstenite::Message::Close(_))) => return true,
+                Some(Ok(_)) => continue,
+            }
+        }
+    })
+    .await;
+    assert_eq!(closed, Ok(true), "an oversized message did not close the socket");
+    // The session itself is unharmed.
+    let r = s.http.post(s.url(&format!("/v1/sessions/{a}/tick"))).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    s.shutdown().await.unwrap();
+}

@@ -99,6 +99,12 @@ pub struct SceneEntry {
     pub animations: Vec<String>,
 }
 
+/// `GET /v1/sessions`: every session, in id order.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SessionList {
+    pub sessions: Vec<SessionView>,
+}
+
 /// `GET /v1/scenes`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct SceneList {

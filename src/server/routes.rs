@@ -1,6 +1,6 @@
 //! HTTP handlers. Each maps client faults to a 4xx `{error, detail}` and never panics.
 use super::error::ApiError;
-use super::protocol::{CreateSession, EditBatch, SceneList, SessionView, StatsHistory, TickDone};
+use super::protocol::{CreateSession, EditBatch, SceneList, SessionList, SessionView, StatsHistory, TickDone};
 use super::state::{view, AppState};
 use crate::film::{encode, ImageFormat};
 use axum::body::{Body, Bytes};
@@ -88,6 +88,18 @@ pub async fn create_session(
         .await
         .map_err(|e| ApiError::internal(e.to_string()))??;
     Ok((StatusCode::CREATED, Json(view)))
+}
+
+pub async fn list_sessions(State(s): State<Shared>) -> Result<Json<SessionList>, ApiError> {
+    let mut sessions: Vec<SessionView> = s
+        .sessions
+        .read()
+        .map_err(|_| ApiError::internal("session table lock poisoned"))?
+        .values()
+        .map(|e| view(e))
+        .collect();
+    sessions.sort_by(|a, b| a.id.cmp(&b.id));
+    Ok(Json(SessionList { sessions }))
 }
 
 pub async fn get_session(State(s): State<Shared>, Path(id): Path<String>) -> Result<Json<SessionView>, ApiError> {

@@ -26,7 +26,9 @@ pub async fn upgrade(
     ws: WebSocketUpgrade,
 ) -> Result<Response, ApiError> {
     let entry = s.session(&id)?;
-    Ok(ws.on_upgrade(move |socket| serve(socket, s, entry)))
+    // One size limit for HTTP bodies and WebSocket messages (the library's default is 64 MiB).
+    let limit = s.config.limits.max_body_bytes;
+    Ok(ws.max_message_size(limit).max_frame_size(limit).on_upgrade(move |socket| serve(socket, s, entry)))
 }
 
 struct Subscription {
