@@ -5,6 +5,10 @@ use relume::technique::bdpt::BdptConfig;
 use relume::technique::TechniqueConfig;
 use serde_json::json;
 
+/// How closely bdpt must match the `path` reference on the Cornell box; the negative control
+/// must fail the same tolerance.
+const CORNELL_TOLERANCE: Tolerance = Tolerance { channel: 0.02, block: 0.06, floor: 0.002 };
+
 fn bdpt(spp: u32) -> BdptConfig {
     BdptConfig { spp, ..BdptConfig::default() }
 }
@@ -33,12 +37,12 @@ fn cornell_box_matches_the_path_reference_with_and_without_permutation() {
     for permute in [true, false] {
         let c = BdptConfig { permute, ..bdpt(128) };
         let img = render(scene.clone(), TechniqueConfig::Bdpt(c), 5, 1, 2).image;
-        assert_matches_reference(&format!("bdpt permute {permute}"), &img, &reference, 0.02, 0.06, 0.002);
+        assert_matches_reference(&format!("bdpt permute {permute}"), &img, &reference, CORNELL_TOLERANCE);
     }
     // Negative control: bdpt cut to two-vertex paths (no indirect light) fails the same bound.
     let broken = BdptConfig { max_path_length: Some(2), ..BdptConfig { spp: 2, ..Default::default() } };
     let img = render(scene.clone(), TechniqueConfig::Bdpt(broken), 5, 1, 2).image;
-    assert_rejected_by_reference("bdpt, two vertices", &img, &reference, 0.02, 0.06, 0.002);
+    assert_rejected_by_reference("bdpt, two vertices", &img, &reference, CORNELL_TOLERANCE);
 }
 
 #[test]

@@ -199,60 +199,48 @@ pub fn block_means(img: &LinearImage) -> Vec<f64> {
     out
 }
 
-/// Whether `image` matches `reference`: every channel mean within `channel_tolerance`
-/// (relative), and every 4×4 block's mean luminance within `block_tolerance` (relative) plus
-/// `block_floor` (absolute, for dark blocks). `Err` says which comparison failed.
-pub fn matches_reference(
-    image: &LinearImage,
-    reference: &LinearImage,
-    channel_tolerance: f32,
-    block_tolerance: f64,
-    block_floor: f64,
-) -> Result<(), String> {
+/// How closely an image must match a reference: every channel mean within `channel`
+/// (relative), and every 4×4 block's mean luminance within `block` (relative) plus `floor`
+/// (absolute, for dark blocks).
+#[derive(Clone, Copy, Debug)]
+pub struct Tolerance {
+    pub channel: f32,
+    pub block: f64,
+    pub floor: f64,
+}
+
+/// Whether `image` matches `reference` within `tol`; `Err` says which comparison failed.
+pub fn matches_reference(image: &LinearImage, reference: &LinearImage, tol: Tolerance) -> Result<(), String> {
     let (a, b) = (image.mean(), reference.mean());
     for (x, y) in a.to_array().iter().zip(b.to_array()) {
-        if (x - y).abs() >= channel_tolerance * y {
+        if (x - y).abs() >= tol.channel * y {
             return Err(format!("channel {x} vs {y} (means {a:?} vs {b:?})"));
         }
     }
     for (i, (p, r)) in block_means(image).iter().zip(block_means(reference)).enumerate() {
-        if (p - r).abs() >= block_tolerance * r + block_floor {
+        if (p - r).abs() >= tol.block * r + tol.floor {
             return Err(format!("block {i}: {p} vs {r}"));
         }
     }
     Ok(())
 }
 
-/// Asserts `image` matches `reference` ([`matches_reference`]).
-pub fn assert_matches_reference(
-    label: &str,
-    image: &LinearImage,
-    reference: &LinearImage,
-    channel_tolerance: f32,
-    block_tolerance: f64,
-    block_floor: f64,
-) {
+/// Asserts `image` matches `reference` within `tol` ([`matches_reference`]).
+pub fn assert_matches_reference(label: &str, image: &LinearImage, reference: &LinearImage, tol: Tolerance) {
     assert_finite_non_negative(image);
     eprintln!("{label}: {:?} against the reference {:?}", image.mean(), reference.mean());
-    if let Err(e) = matches_reference(image, reference, channel_tolerance, block_tolerance, block_floor) {
+    if let Err(e) = matches_reference(image, reference, tol) {
         panic!("{label}: {e}");
     }
 }
 
 /// The negative control of [`assert_matches_reference`]: a deliberately broken variant's
-/// `image` must fail the same tolerances, or they could not tell a broken technique from a
+/// `image` must fail the same tolerance, or it could not tell a broken technique from a
 /// working one.
-pub fn assert_rejected_by_reference(
-    label: &str,
-    image: &LinearImage,
-    reference: &LinearImage,
-    channel_tolerance: f32,
-    block_tolerance: f64,
-    block_floor: f64,
-) {
-    match matches_reference(image, reference, channel_tolerance, block_tolerance, block_floor) {
+pub fn assert_rejected_by_reference(label: &str, image: &LinearImage, reference: &LinearImage, tol: Tolerance) {
+    match matches_reference(image, reference, tol) {
         Ok(()) => {
-            panic!("{label}: the broken variant passes the tolerances ({:?} vs {:?})", image.mean(), reference.mean())
+            panic!("{label}: the broken variant passes the tolerance ({:?} vs {:?})", image.mean(), reference.mean())
         }
         Err(e) => eprintln!("{label} (negative control) fails as it must: {e}"),
     }
