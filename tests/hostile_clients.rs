@@ -147,3 +147,23 @@ async fn sessions_are_listed_and_websocket_messages_share_the_body_limit() {
     assert_eq!(r.status(), 200);
     s.shutdown().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn framework_errors_have_the_json_error_body_too() {
+    // A wrong method and a plain GET on the WebSocket route got the framework's empty or
+    // plain-text answers; every error now has `{error, detail}`.
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(small("cornell-box")).await;
+    for (method, path, status) in [
+        (reqwest::Method::GET, format!("/v1/sessions/{id}/tick"), 405u16),
+        (reqwest::Method::PUT, "/v1/sessions".to_string(), 405),
+        (reqwest::Method::GET, format!("/v1/sessions/{id}/ws"), 0),
+    ] {
+        let r = s.http.request(method.clone(), s.url(&path)).send().await.expect("request");
+        let got = r.status().as_u16();
+        assert!(if status == 0 { (400..500).contains(&got) } else { got == status }, "{method} {path}: {got}");
+        let v: Value = r.json().await.unwrap_or_else(|e| panic!("{method} {path}: not JSON: {e}"));
+        assert!(v["error"].is_string() && v["detail"].as_str().is_some_and(|d| d.contains("/v1/sessions")), "{v}");
+    }
+    s.shutdown().await.unwrap();
+}

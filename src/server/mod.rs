@@ -22,7 +22,7 @@ pub use state::{AppState, Limits, ServerConfig};
 use axum::extract::{DefaultBodyLimit, Request, State};
 use axum::http::StatusCode;
 use axum::middleware::{self, Next};
-use axum::response::Response;
+use axum::response::{IntoResponse, Response};
 use axum::routing::{get, post};
 use axum::Router;
 use routes::Shared;
@@ -74,6 +74,8 @@ async fn count_rejections(State(s): State<Shared>, req: Request, next: Next) -> 
             StatusCode::BAD_REQUEST => "bad_request",
             StatusCode::UNAUTHORIZED => "unauthorized",
             StatusCode::NOT_FOUND => "not_found",
+            StatusCode::METHOD_NOT_ALLOWED => "method_not_allowed",
+            StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
             StatusCode::REQUEST_TIMEOUT => "timeout",
             StatusCode::CONFLICT => "session_failed",
             StatusCode::GONE => "session_closed",
@@ -86,6 +88,35 @@ async fn count_rejections(State(s): State<Shared>, req: Request, next: Next) -> 
         s.metrics.reject(reason);
     }
     resp
+}
+
+/// Gives every error answer the JSON `{error, detail}` body, including those the framework
+/// writes itself as plain text or nothing: 405 (wrong method), 408 (request timeout) and
+/// failed WebSocket upgrades (a plain GET on `/ws`).
+async fn json_errors(req: Request, next: Next) -> Response {
+    let method = req.method().clone();
+    let path = req.uri().path().to_string();
+    let resp = next.run(req).await;
+    let status = resp.status();
+    let is_json = resp
+        .headers()
+        .get(axum::http::header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .is_some_and(|v| v.starts_with("application/json"));
+    if !(status.is_client_error() || status.is_server_error()) || is_json {
+        return resp;
+    }
+    let (error, detail) = match status {
+        StatusCode::METHOD_NOT_ALLOWED => ("method_not_allowed", format!("{method} is not allowed on {path}")),
+        StatusCode::REQUEST_TIMEOUT => {
+            ("timeout", format!("{method} {path} took longer than the server's request timeout"))
+        }
+        _ if path.ends_with("/ws") => {
+            ("upgrade_failed", format!("{path} is a WebSocket: connect with an Upgrade request"))
+        }
+        _ => ("error", format!("{method} {path}: {}", status.canonical_reason().unwrap_or("error"))),
+    };
+    ApiError::new(status, error, detail).into_response()
 }
 
 /// The HTTP application.
@@ -113,6 +144,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .layer(middleware::from_fn_with_state(state.clone(), count_rejections))
         .layer(DefaultBodyLimit::max(limits.max_body_bytes))
         .layer(TimeoutLayer::with_status_code(StatusCode::REQUEST_TIMEOUT, limits.request_timeout))
+        .layer(middleware::from_fn(json_errors))
         .with_state(state)
 }
 
