@@ -44,7 +44,8 @@ async fn batches_valid_alone_but_not_together_are_refused_at_queue_time() {
     assert_eq!(status, 202, "{body}");
     let (status, body) = post(&s, &edits, json!({"edits": [{"target": "camera", "look_at": [278, 273, -300]}]})).await;
     assert_eq!(status, 422, "{body}");
-    assert!(body["detail"].as_str().unwrap_or_default().contains("camera.look_at"), "{body}");
+    // The field is named by its place in the batch that was refused.
+    assert!(body["detail"].as_str().unwrap_or_default().contains("edits[0].camera.look_at"), "{body}");
     // The accepted edit applies and the session keeps working.
     let (status, body) = post(&s, &format!("/v1/sessions/{id}/tick"), json!({})).await;
     assert_eq!(status, 200, "{body}");

@@ -119,11 +119,7 @@ impl Session {
     /// batch queues nothing, so an accepted edit never fails a tick.
     pub fn queue_edits(&mut self, batch: Vec<Edit>) -> Result<(), SceneError> {
         let received = batch.len();
-        let mut merged = self.pending.clone();
-        merged.extend(batch);
-        edits::validate(&self.scene, &merged)?;
-        let (kept, _) = edits::coalesce(merged);
-        self.pending = kept.into_iter().map(|(_, e)| e).collect();
+        self.pending = edits::queue(&self.scene, &self.pending, batch)?;
         self.pending_received += received;
         Ok(())
     }

@@ -173,6 +173,17 @@ pub fn validate(scene: &Scene, edits: &[Edit]) -> Result<(), SceneError> {
     validate_coalesced(scene, &merged)
 }
 
+/// Merges `batch` into the already-coalesced `pending` edits and validates the result as a
+/// whole, coalescing once; returns the new pending edits (latest per target). Errors name the
+/// field by its index in `batch`: `pending` was valid before, so a fault involves the batch.
+pub fn queue(scene: &Scene, pending: &[Edit], batch: Vec<Edit>) -> Result<Vec<Edit>, SceneError> {
+    let offset = pending.len();
+    let (merged, _) = coalesce(pending.iter().cloned().chain(batch).collect());
+    let in_batch: Vec<(usize, Edit)> = merged.into_iter().map(|(i, e)| (i.saturating_sub(offset), e)).collect();
+    validate_coalesced(scene, &in_batch)?;
+    Ok(in_batch.into_iter().map(|(_, e)| e).collect())
+}
+
 fn validate_coalesced(scene: &Scene, edits: &[(usize, Edit)]) -> Result<(), SceneError> {
     for (i, e) in edits {
         let i = *i;

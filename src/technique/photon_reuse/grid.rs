@@ -458,6 +458,7 @@ mod tests {
                 if tick > 0 && !p.grid_rebuilt {
                     updated += 1;
                     assert!(p.grid_added + p.grid_removed < grid.len() as u64, "{reuse:?} tick {tick}: {p:?}");
+                    assert!(p.grid_cells_touched > 0, "an update that changed photons touched no cell: {p:?}");
                 }
             }
             assert!(updated >= 4, "{reuse:?}: the grid was rebuilt instead of updated ({updated} updates)");

@@ -445,6 +445,7 @@ impl PhotonReuse {
         let u = self.grid.update(scene, store, &touched);
         self.pending.grid_removed = u.removed;
         self.pending.grid_added = u.added;
+        self.pending.grid_cells_touched = u.cells_touched;
         self.pending.grid_ms = ms(t);
     }
 }

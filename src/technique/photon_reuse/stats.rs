@@ -46,6 +46,8 @@ pub struct PhotonStats {
     /// Photons the grid update took out and put in (a rebuild counts every photon as put in).
     pub grid_removed: u64,
     pub grid_added: u64,
+    /// Grid cells those photons left or entered.
+    pub grid_cells_touched: u64,
     /// The grid was built from scratch this tick (the first tick, `off` mode, or more than a
     /// quarter of the paths changed) rather than updated in place.
     pub grid_rebuilt: bool,
