@@ -230,7 +230,8 @@ fn every_mode_matches_the_path_reference_after_a_block_moves() {
             s.tick().unwrap();
             s.queue_edits(vec![nudge.clone()]).unwrap();
             let mut last = s.tick().unwrap();
-            for _ in 0..15 {
+            // 32 passes: at 16 the camera noise alone moves the mean by about 2%.
+            for _ in 0..31 {
                 last = s.tick().unwrap();
             }
             last.image
@@ -242,7 +243,7 @@ fn every_mode_matches_the_path_reference_after_a_block_moves() {
     let stale = pool.install(|| {
         let config = PhotonReuseConfig { paths: 250_000, reuse: ReuseMode::Naive, ..PhotonReuseConfig::default() };
         let mut s = session(scene.clone(), config, 21, &device);
-        (0..16).map(|_| s.tick().unwrap()).last().unwrap().image
+        (0..33).map(|_| s.tick().unwrap()).last().unwrap().image
     });
     assert_rejected_by_reference("never updated", &stale, &reference, AFTER_MOVE_TOLERANCE);
 }

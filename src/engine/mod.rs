@@ -7,7 +7,7 @@
 //!    is counted (`edits_unchanged`) and resets, commits and invalidates nothing.
 //! 3. **Commit** only the moved instances to Embree's top-level scene.
 //! 4. **Update** the technique with the delta (verify / invalidate / retrace); the film is reset
-//!    when anything changed.
+//!    when anything changed, unless the technique restarts only the pixels the change touched.
 //! 5. **Render** on rayon.
 //! 6. **Resolve** the film into a linear image; encoding happens where the frame is consumed.
 //!
@@ -151,13 +151,13 @@ impl Session {
         self.accel.update_instances(&self.scene, &moved)?;
         times.commit_ms = ms(t);
 
-        // Let the technique verify and invalidate; restart accumulation on any change.
+        // Let the technique verify and invalidate; restart accumulation where it says.
         let t = Instant::now();
-        if !delta.is_empty() {
-            self.film.reset();
-        }
         let ctx = RenderContext { scene: &self.scene, accel: &self.accel, seed: self.seed, tick: self.tick };
         self.technique.update(&ctx, &delta)?;
+        if self.technique.restarts_whole_film(&delta) {
+            self.film.reset();
+        }
         times.update_ms = ms(t);
 
         let t = Instant::now();

@@ -60,6 +60,23 @@ impl Film {
         self.passes = 0;
     }
 
+    /// Restarts the accumulation of only the listed pixels, each with one estimate: for a
+    /// technique that knows which pixels a change touched (the rest keep accumulating). A
+    /// new accumulation id tells clients the image restarted; `passes` becomes 1, the fewest
+    /// any pixel now holds.
+    pub fn restart_pixels(&mut self, restarts: &[(u32, Rgb)]) {
+        if restarts.is_empty() {
+            return;
+        }
+        for &(index, value) in restarts {
+            let mut p = PixelAccum { count: 1.0, ..PixelAccum::default() };
+            p.add(value);
+            self.pixels[index as usize] = p;
+        }
+        self.accumulation_id += 1;
+        self.passes = 1;
+    }
+
     /// Runs `f(first_pixel_index, chunk)` on consecutive chunks of `chunk_len` pixels in
     /// parallel and reduces what they return with `merge`. Chunks are fixed by index, so pixel
     /// values do not depend on scheduling.

@@ -336,7 +336,8 @@ fn apply_light(
     true
 }
 
-fn light_bounds(scene: &Scene, idx: usize) -> Aabb {
+/// World bounds of light `idx` (a point for point and spot lights).
+pub fn light_bounds(scene: &Scene, idx: usize) -> Aabb {
     match &scene.lights[idx].geometry {
         super::LightGeometry::Area { triangles, .. } => Aabb::of_points(triangles.iter().flatten().copied()),
         _ => {

@@ -125,6 +125,28 @@ impl BoxTree {
     }
 }
 
+impl BoxTree {
+    /// Does any box overlap `query` (touching counts)?
+    pub fn overlaps(&self, query: &Aabb) -> bool {
+        let meets = |b: &Aabb| b.min.cmple(query.max).all() && query.min.cmple(b.max).all();
+        let mut stack = vec![0u32];
+        while let Some(n) = stack.pop() {
+            let Some(n) = self.nodes.get(n as usize) else { continue };
+            if !meets(&n.bounds) {
+                continue;
+            }
+            if n.count > 0 {
+                if self.boxes[n.first as usize..(n.first + n.count) as usize].iter().any(meets) {
+                    return true;
+                }
+            } else {
+                stack.extend([n.first, n.first + 1]);
+            }
+        }
+        false
+    }
+}
+
 /// Does the segment `origin + t·dir`, t ∈ [0, t_max], touch the box? (Slab test; touching a
 /// face counts, which keeps the test conservative.)
 pub fn segment_hits_box(origin: Vec3, dir: Vec3, t_max: f32, b: &Aabb) -> bool {

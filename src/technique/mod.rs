@@ -91,7 +91,7 @@ impl TechniqueStats {
     pub fn memory_bytes(&self) -> u64 {
         match self {
             TechniqueStats::Path(_) => 0,
-            TechniqueStats::PhotonReuse(s) => s.memory.total() + s.grid_bytes,
+            TechniqueStats::PhotonReuse(s) => s.memory.total() + s.grid_bytes + s.pixel_bytes,
             TechniqueStats::Bdpt(_) => 0,
             TechniqueStats::InstantCache(s) => s.vpl_bytes + s.cache_bytes,
             TechniqueStats::ParticleGi(s) => s.memory_bytes(),
@@ -171,9 +171,15 @@ impl TechniqueConfig {
 pub trait Technique: Send {
     fn id(&self) -> &'static str;
 
-    /// Reacts to what changed since the last tick (an empty delta on the first tick). The film
-    /// has already been reset by the engine if anything changed.
+    /// Reacts to what changed since the last tick (an empty delta on the first tick).
     fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError>;
+
+    /// Asked after `update`: should the engine restart the whole film for this delta? The
+    /// default is any change. A technique that restarts only the pixels a change touched
+    /// answers no and does that itself in `render` ([`Film::restart_pixels`]).
+    fn restarts_whole_film(&self, delta: &SceneDelta) -> bool {
+        !delta.is_empty()
+    }
 
     /// Adds this tick's samples to `film`.
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError>;

@@ -29,6 +29,9 @@ pub struct PhotonReuseConfig {
     pub gather_photons: u32,
     pub radius: Option<f32>,
     pub spp: u32,
+    /// Share of the paths emitted afresh each still tick, while the gather radius shrinks
+    /// (progressive refinement; 0 turns it off).
+    pub refine: f32,
 }
 
 impl Default for PhotonReuseConfig {
@@ -42,9 +45,13 @@ impl Default for PhotonReuseConfig {
             gather_photons: 64,
             radius: None,
             spp: 1,
+            refine: 0.125,
         }
     }
 }
+
+/// Largest share of the paths a still tick re-emits: more would rebuild the grid every tick.
+pub const MAX_REFINE: f32 = 0.25;
 
 /// Largest accepted path count.
 pub const MAX_PATHS: u32 = 16_000_000;
@@ -71,6 +78,9 @@ impl PhotonReuseConfig {
             if !(r.is_finite() && r > 0.0) {
                 return bad("radius", "must be a positive number of meters".into());
             }
+        }
+        if !(self.refine.is_finite() && (0.0..=MAX_REFINE).contains(&self.refine)) {
+            return bad("refine", format!("must lie in 0..={MAX_REFINE} (a share of the paths)"));
         }
         if self.spp == 0 || self.spp > crate::technique::path::MAX_SPP {
             return bad("spp", format!("must lie in 1..={}", crate::technique::path::MAX_SPP));

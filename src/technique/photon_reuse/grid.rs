@@ -28,15 +28,32 @@ const FACING_COSINE: f32 = 0.5;
 const NONE: u32 = u32::MAX;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
-struct GridPhoton {
-    position: Vec3,
+pub struct GridPhoton {
+    pub position: Vec3,
     /// The unit geometric normal of the photon's surface, on the side the photon arrived from.
     /// Gathering needs only this: the Lambertian BRDF is constant on a side, and a query only
     /// accepts photons whose surface faces the way its own does (see [`PhotonGrid::radiance`]).
-    facing: Vec3,
-    power: Rgb,
+    pub facing: Vec3,
+    pub power: Rgb,
     /// `path · B + row`.
     key: u32,
+}
+
+impl GridPhoton {
+    /// This photon's term of the density estimate at `p` (unit normal `n`, on the side
+    /// `n_side` facing `wo`): f_r·Φ if it lies within √`r2` on a surface facing the same way,
+    /// else nothing. The estimate is Σ terms / (π r²); a gather and a splat share this.
+    pub fn term(&self, material: &Material, p: Vec3, n: Vec3, wo: Vec3, n_side: Vec3, r2: f32) -> Option<Rgb> {
+        ((self.position - p).length_squared() <= r2 && self.facing.dot(n_side) > FACING_COSINE)
+            .then(|| material.eval(n, wo, self.facing) * self.power)
+    }
+}
+
+/// The photons one update took out of the grid and put in, for renders that splat them.
+#[derive(Clone, Debug, Default)]
+pub struct ChangedPhotons {
+    pub removed: Vec<GridPhoton>,
+    pub added: Vec<GridPhoton>,
 }
 
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -58,7 +75,7 @@ fn add(s: [f64; 3], p: Rgb) -> [f64; 3] {
 
 /// A cheap hash for cell coordinates (the gather looks up eight per query).
 #[derive(Default)]
-struct CellHasher(u64);
+pub struct CellHasher(u64);
 
 impl Hasher for CellHasher {
     fn finish(&self) -> u64 {
@@ -74,7 +91,9 @@ impl Hasher for CellHasher {
     }
 }
 
-type CellMap = HashMap<[i32; 3], u32, BuildHasherDefault<CellHasher>>;
+/// A map keyed by cell coordinates, with the cheap hash.
+pub type CellIndex<V> = HashMap<[i32; 3], V, BuildHasherDefault<CellHasher>>;
+type CellMap = CellIndex<u32>;
 
 /// One cell's share of an update: its slot, the keys leaving it and the photons entering it.
 type CellChange<'a> = (u32, &'a [(u32, u32)], &'a [(u32, GridPhoton)]);
@@ -91,7 +110,8 @@ pub struct GridUpdate {
 #[derive(Clone, Debug, Default)]
 pub struct PhotonGrid {
     pub radius: f32,
-    inv_cell: f32,
+    /// 1 / the cell side (2r).
+    pub inv_cell: f32,
     /// B: photons per path, the stride of keys.
     rows: u32,
     index: CellMap,
@@ -134,7 +154,7 @@ fn photon_at(
 }
 
 /// A photon's cell, clamped to the ±2²⁰ cells a side that [`pack`] orders exactly.
-fn cell_of(p: Vec3, inv_cell: f32) -> [i32; 3] {
+pub fn cell_of(p: Vec3, inv_cell: f32) -> [i32; 3] {
     (p * inv_cell).floor().clamp(Vec3::splat(-CELL_LIMIT), Vec3::splat(CELL_LIMIT - 1.0)).as_ivec3().to_array()
 }
 
@@ -213,8 +233,9 @@ impl PhotonGrid {
     }
 
     /// Replaces the photons of `paths` (ascending, no repeats) by what the store holds for them
-    /// now. Costs time in proportion to those photons and the cells they touch, not to the grid.
-    pub fn update(&mut self, scene: &Scene, store: &PathStore, paths: &[usize]) -> GridUpdate {
+    /// now, returning what it took out and put in. Costs time in proportion to those photons
+    /// and the cells they touch, not to the grid.
+    pub fn update(&mut self, scene: &Scene, store: &PathStore, paths: &[usize]) -> (GridUpdate, ChangedPhotons) {
         let diffuse = diffuse_objects(scene);
         let diffuse = diffuse.as_slice();
         let inv_cell = self.inv_cell;
@@ -252,17 +273,19 @@ impl PhotonGrid {
         // Both lists are in key order within a slot once sorted by slot (stably).
         leaving.par_sort_by_key(|&(slot, _)| slot);
         entering.par_sort_by_key(|&(slot, _)| slot);
-        let touched = self.merge_changes(&leaving, &entering);
+        let (touched, removed) = self.merge_changes(&leaving, &entering);
         if new_cells {
             self.sort_order();
         }
         self.sum_power();
-        GridUpdate { cells_touched: touched, ..stats }
+        let added = entering.into_iter().map(|(_, p)| p).collect();
+        (GridUpdate { cells_touched: touched, ..stats }, ChangedPhotons { removed, added })
     }
 
     /// Applies sorted removals and insertions cell by cell, in parallel: each touched cell is
-    /// merged in one pass, keeping key order. Returns how many cells it touched.
-    fn merge_changes(&mut self, leaving: &[(u32, u32)], entering: &[(u32, GridPhoton)]) -> u64 {
+    /// merged in one pass, keeping key order. Returns how many cells it touched and the
+    /// photons it took out.
+    fn merge_changes(&mut self, leaving: &[(u32, u32)], entering: &[(u32, GridPhoton)]) -> (u64, Vec<GridPhoton>) {
         let mut work: Vec<CellChange> = Vec::new();
         let (mut l, mut e) = (leaving, entering);
         while !l.is_empty() || !e.is_empty() {
@@ -281,26 +304,35 @@ impl PhotonGrid {
         for (w, (slot, _, _)) in work.iter().enumerate() {
             of_slot[*slot as usize] = w as u32;
         }
-        self.cells.par_iter_mut().enumerate().filter(|(s, _)| of_slot[*s] != u32::MAX).for_each(|(s, cell)| {
-            let (_, out, ins) = work[of_slot[s] as usize];
-            let mut gone = out.iter().map(|x| x.1).peekable();
-            let mut coming = ins.iter().map(|x| x.1).peekable();
-            let mut merged = Vec::with_capacity(cell.photons.len() + ins.len());
-            for p in cell.photons.drain(..) {
-                while gone.next_if(|&k| k < p.key).is_some() {}
-                if gone.next_if_eq(&p.key).is_some() {
-                    continue;
+        let removed = self
+            .cells
+            .par_iter_mut()
+            .enumerate()
+            .filter(|(s, _)| of_slot[*s] != u32::MAX)
+            .flat_map_iter(|(s, cell)| {
+                let (_, out, ins) = work[of_slot[s] as usize];
+                let mut gone = out.iter().map(|x| x.1).peekable();
+                let mut coming = ins.iter().map(|x| x.1).peekable();
+                let mut merged = Vec::with_capacity(cell.photons.len() + ins.len());
+                let mut removed = Vec::with_capacity(out.len());
+                for p in cell.photons.drain(..) {
+                    while gone.next_if(|&k| k < p.key).is_some() {}
+                    if gone.next_if_eq(&p.key).is_some() {
+                        removed.push(p);
+                        continue;
+                    }
+                    while let Some(c) = coming.next_if(|c| c.key < p.key) {
+                        merged.push(c);
+                    }
+                    merged.push(p);
                 }
-                while let Some(c) = coming.next_if(|c| c.key < p.key) {
-                    merged.push(c);
-                }
-                merged.push(p);
-            }
-            merged.extend(coming);
-            cell.photons = merged;
-            cell.sum_power();
-        });
-        work.len() as u64
+                merged.extend(coming);
+                cell.photons = merged;
+                cell.sum_power();
+                removed
+            })
+            .collect();
+        (work.len() as u64, removed)
     }
 
     fn sort_order(&mut self) {
@@ -345,10 +377,16 @@ impl PhotonGrid {
             .collect()
     }
 
-    /// Reflected radiance at `p` (unit normal `n`) towards `wo` from photons within the radius.
-    pub fn radiance(&self, material: &Material, p: Vec3, n: Vec3, wo: Vec3) -> Rgb {
+    /// The kernel's normalisation: the estimate is Σ terms / (π r²).
+    pub fn kernel_area(&self) -> f32 {
+        std::f32::consts::PI * self.radius * self.radius
+    }
+
+    /// Σ of [`GridPhoton::term`] over the photons near `p` (unit normal `n`), seen from `wo`, in
+    /// f64 so that splats added and taken away later stay within rounding of a fresh gather.
+    pub fn gather_sum(&self, material: &Material, p: Vec3, n: Vec3, wo: Vec3) -> [f64; 3] {
         if self.len == 0 {
-            return Rgb::BLACK;
+            return [0.0; 3];
         }
         let r2 = self.radius * self.radius;
         let lo = IVec3::from(cell_of(p - Vec3::splat(self.radius), self.inv_cell));
@@ -357,20 +395,27 @@ impl PhotonGrid {
         // other side of a thin wall, nor the inside face of a corner (a box seen from outside
         // would otherwise glow along its edges with the light inside it).
         let n_side = if n.dot(wo) >= 0.0 { n } else { -n };
-        let mut sum = Rgb::BLACK;
+        let mut sum = [0.0; 3];
         for z in lo.z..=hi.z {
             for y in lo.y..=hi.y {
                 for x in lo.x..=hi.x {
                     let Some(&slot) = self.index.get(&[x, y, z]) else { continue };
                     for ph in &self.cells[slot as usize].photons {
-                        if (ph.position - p).length_squared() <= r2 && ph.facing.dot(n_side) > FACING_COSINE {
-                            sum += material.eval(n, wo, ph.facing) * ph.power;
+                        if let Some(t) = ph.term(material, p, n, wo, n_side, r2) {
+                            sum = add(sum, t);
                         }
                     }
                 }
             }
         }
-        sum / (std::f32::consts::PI * r2)
+        sum
+    }
+
+    /// Reflected radiance at `p` (unit normal `n`) towards `wo` from photons within the radius.
+    pub fn radiance(&self, material: &Material, p: Vec3, n: Vec3, wo: Vec3) -> Rgb {
+        let s = self.gather_sum(material, p, n, wo);
+        let k = self.kernel_area() as f64;
+        Rgb::new((s[0] / k) as f32, (s[1] / k) as f32, (s[2] / k) as f32)
     }
 }
 
@@ -378,51 +423,11 @@ impl PhotonGrid {
 mod tests {
     use super::PhotonGrid;
     use crate::embree::Device;
-    use crate::scene::edits::{self, Edit, SceneDelta};
-    use crate::scene::{Scene, SceneAccel, Trs};
+    use crate::scene::edits::{self, SceneDelta};
+    use crate::scene::SceneAccel;
+    use crate::technique::photon_reuse::test_scenes::{cornell, edits_at};
     use crate::technique::photon_reuse::{PhotonReuse, PhotonReuseConfig, ReuseMode};
     use crate::technique::{RenderContext, Technique};
-    use std::path::Path;
-
-    /// The Cornell box at 16² with its short block and its light dynamic.
-    fn cornell() -> Scene {
-        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
-        let text = std::fs::read_to_string(root.join("cornell-box.json")).expect("bundled scene");
-        let mut desc: crate::scene::SceneDesc = serde_json::from_str(&text).expect("scene JSON");
-        for o in desc.objects.iter_mut().filter(|o| o.name == "short-block") {
-            o.dynamic = true;
-        }
-        for l in &mut desc.lights {
-            l.dynamic = true;
-        }
-        desc.camera.resolution = [16, 16];
-        Scene::from_desc(desc, &root, &root).expect("valid scene")
-    }
-
-    /// Tick `tick`'s edit: the block slides; every third tick the light moves and tilts too (a
-    /// tilt rescales the flux of the paths it keeps).
-    fn edits_at(scene: &Scene, tick: u32) -> Vec<Edit> {
-        let block = &scene.desc().objects[scene.object_index("short-block").expect("block")];
-        let mut edits = vec![Edit::Object {
-            name: "short-block".into(),
-            transform: Trs { translation: [-12.0 * tick as f32, 0.0, 8.0 * tick as f32], ..block.transform },
-        }];
-        if tick % 3 == 0 {
-            let light = &scene.desc().lights[0];
-            let t = light.transform.translation;
-            let tilt = glam::Quat::from_rotation_x(0.15) * glam::Quat::from_array(light.transform.rotation);
-            edits.push(Edit::Light {
-                name: light.name.clone(),
-                transform: Some(Trs {
-                    translation: [t[0] + 5.0, t[1], t[2] - 5.0],
-                    rotation: tilt.to_array(),
-                    ..light.transform
-                }),
-                emitter: None,
-            });
-        }
-        edits
-    }
 
     #[test]
     fn an_updated_grid_equals_a_rebuilt_one() {

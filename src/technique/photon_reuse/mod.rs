@@ -22,10 +22,20 @@
 //!    settled, then trace fills and retraces in parallel.
 //! 5. Update the photon grid in place for the paths whose photons changed (`grid.rs`: cost in
 //!    proportion to their photons; rebuilt only on the first tick, in `off` mode, or when more
-//!    than a quarter of the paths changed), with the radius fixed at the first tick, and render
-//!    (`gather.rs`): camera rays through specular chains to the first diffuse hit;
-//!    direct light by next-event estimation, indirect light by a density estimate over photons
-//!    from the second bounce on. The film accumulates while nothing changes.
+//!    than a quarter of the paths changed), with r₀ fixed at the first tick.
+//! 6. Render. A full pass (`gather.rs`) takes one camera sample per pixel: camera rays through
+//!    specular chains to the first diffuse hit; direct light by next-event estimation, indirect
+//!    light by a density estimate over photons from the second bounce on; each pixel's sample
+//!    is kept (`pixels.rs`). When only objects moved and the camera stood still, the render
+//!    follows the change instead: it resamples the pixels a moved box may cross, forgets the
+//!    direct light where a moved box may cast or lift a shadow, splats the photons the grid took
+//!    out and put in into the kept photon sums, and restarts only those pixels. A camera move,
+//!    a light or material edit, or a rebuilt grid renders in full.
+//! 7. **Progressive refinement** on a still tick (nothing changed): a `refine` share of the
+//!    paths (of lights that never moved) is emitted afresh and the radius shrinks,
+//!    r_k² = r₀² Π_{i≤k} (i + α)/(i + 1) with α = 2/3, as in Knaus and Zwicker's probabilistic
+//!    progressive photon mapping (2011); every pass is a full one and the film keeps
+//!    accumulating. Any change restores r₀.
 //!
 //! `reuse: "off"` is the baseline: every path is emitted anew whenever the scene changed, and
 //! no distribution map is kept.
@@ -41,10 +51,15 @@
 //! | `gather_photons` | 64 | k: the radius is chosen so a disc of it holds k photons on average: r = √(k·A / (π·M)), A the diffuse area, M the photons gathered |
 //! | `radius` | none | overrides r (meters) |
 //! | `spp` | 1 | camera samples per pixel per tick |
+//! | `refine` | 0.125 | share of the paths emitted afresh each still tick (0: off; at most 0.25) |
 //!
 //! # Bias and consistency
 //! Direct light is unbiased. Indirect light is a photon density estimate: biased by the kernel
-//! (blur of width r, light bleeding near corners), consistent as N → ∞ and r → 0. Russian
+//! (blur of width r, light bleeding near corners), consistent as N → ∞ and r → 0. While the
+//! scene is still, refinement makes the film's average consistent at fixed N: the kernel bias
+//! of pass k falls as r_k² ∝ k^(α−1) = k^(−1/3), and the photon noise of the average as
+//! k^(−α) (the passes' maps share all but a `refine` share of their paths, which scales the
+//! variance by about 1/`refine`, not the rate), so the MSE falls as O(k^(−2/3)). Russian
 //! roulette and B truncate paths: B = 7 loses the energy beyond seven bounces. `naive` reuse
 //! adds no bias: a kept prefix is a valid sample, a re-intersected segment keeps a direction
 //! sampled independently of what it hits, and every retraced tail is a fresh sample. `error`
@@ -63,25 +78,29 @@ mod error;
 mod gather;
 mod grid;
 mod lights;
+mod pixels;
 mod stats;
 mod store;
+#[cfg(test)]
+mod test_scenes;
 mod trace;
 mod verify;
 
 pub use config::{PhotonReuseConfig, ReuseMode, MAX_PATHS};
 pub use distribution::{DistributionMap, MapResolution, MAX_CELLS};
-pub use grid::{GridUpdate, PhotonGrid};
+pub use grid::{ChangedPhotons, GridUpdate, PhotonGrid};
 pub use stats::PhotonStats;
 pub use store::{PathStore, PathWord, StoreMemory};
 
-use super::box_tree::BoxTree;
+use super::box_tree::{BoxTree, BOX_SLACK};
 use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
 use crate::film::Film;
-use crate::scene::edits::SceneDelta;
+use crate::scene::edits::{self, Aabb, SceneDelta};
 use crate::scene::{Scene, SurfaceId};
 use distribution::EmissionFrame;
 use glam::Affine3A;
 use lights::{MappedLight, Moved};
+use pixels::{Moves, PixelCache};
 use rayon::prelude::*;
 use std::time::Instant;
 use trace::{Retrace, TracedTail, Tracer};
@@ -98,6 +117,18 @@ enum Standing {
     Decided,
 }
 
+/// How this tick's render goes, as `update` found it: handed to `render` and spent there.
+#[derive(Debug, Default)]
+enum Plan {
+    /// A full pass over every pixel (the first tick, a still tick, or a change the kept
+    /// pixels cannot follow).
+    #[default]
+    Full,
+    /// Only objects moved (or only photons changed) while the camera stood still: the kept
+    /// pixels follow what the grid took out and put in (`pixels.rs`).
+    Follow { changed: ChangedPhotons, boxes: Vec<Aabb>, moved: Vec<bool> },
+}
+
 /// The `photon_reuse` technique.
 pub struct PhotonReuse {
     config: PhotonReuseConfig,
@@ -106,9 +137,22 @@ pub struct PhotonReuse {
     /// Distribution maps of lights that have moved at least once.
     maps: Vec<Option<MappedLight>>,
     grid: PhotonGrid,
+    /// r₀: the gather radius chosen at the first tick (the grid's cells are 2r₀ wide).
+    base_radius: f32,
+    /// Still ticks refined since the last change (k of the radius schedule), r_k / r₀, and
+    /// where the next refinement's slice of paths starts.
+    refined: u32,
+    shrink: f32,
+    refine_cursor: usize,
+    pixels: PixelCache,
+    plan: Plan,
     passes: u64,
     pending: PhotonStats,
 }
+
+/// α of the radius schedule: each still tick keeps this share of the photon density's growth
+/// (Knaus and Zwicker's recommended 2/3, which balances bias and variance).
+const REFINE_ALPHA: f32 = 2.0 / 3.0;
 
 fn ms(since: Instant) -> f64 {
     since.elapsed().as_secs_f64() * 1e3
@@ -123,6 +167,12 @@ impl PhotonReuse {
             paths_per_light: Vec::new(),
             maps: Vec::new(),
             grid: PhotonGrid::default(),
+            base_radius: 0.0,
+            refined: 0,
+            shrink: 1.0,
+            refine_cursor: 0,
+            pixels: PixelCache::default(),
+            plan: Plan::Full,
             passes: 0,
             pending: PhotonStats::default(),
         })
@@ -220,8 +270,10 @@ impl PhotonReuse {
         }
         let transport_changed = !delta.moved.is_empty() || !delta.lights.is_empty() || !delta.materials.is_empty();
         let settling = self.maps.iter().flatten().any(|m| !m.map.settled());
-        if !transport_changed && !settling {
-            return false;
+        if transport_changed || settling {
+            self.restore_radius();
+        } else {
+            return self.refine(ctx, store, touched);
         }
         if self.config.reuse == ReuseMode::Off {
             if !transport_changed {
@@ -408,14 +460,48 @@ impl PhotonReuse {
         moved_photons
     }
 
-    /// Picks the gather radius (fixed after the first tick) and rebuilds the photon grid.
+    /// Progressive refinement on a still tick (in the manner of Knaus and Zwicker's
+    /// probabilistic progressive photon mapping): the next `refine` share of the paths of lights
+    /// that never moved is emitted afresh, and the radius shrinks to r_k with
+    /// r_k² = r₀² · Π_{i ≤ k} (i + α)/(i + 1), α = 2/3. Returns whether photons changed.
+    fn refine(&mut self, ctx: &RenderContext, store: &mut PathStore, touched: &mut Vec<usize>) -> bool {
+        let count = (self.config.refine as f64 * store.paths as f64).ceil() as usize;
+        if count == 0 || self.base_radius <= 0.0 {
+            return false;
+        }
+        let unmapped = |i: usize| self.maps.get(store.light[i] as usize).is_none_or(|m| m.is_none());
+        let work: Vec<(usize, Retrace)> = (0..count.min(store.paths))
+            .map(|k| (self.refine_cursor + k) % store.paths)
+            .filter(|&i| unmapped(i))
+            .map(|i| (i, Retrace::Emit))
+            .collect();
+        self.refine_cursor = (self.refine_cursor + count) % store.paths;
+        self.refined += 1;
+        let k = self.refined as f32;
+        self.shrink *= ((k + REFINE_ALPHA) / (k + 1.0)).sqrt();
+        self.grid.radius = self.base_radius * self.shrink;
+        self.pending.refined = work.len() as u64;
+        self.retrace(ctx, store, &work, touched);
+        true
+    }
+
+    /// A change ends the refinement: the radius goes back to r₀.
+    fn restore_radius(&mut self) {
+        self.refined = 0;
+        self.shrink = 1.0;
+        if self.base_radius > 0.0 {
+            self.grid.radius = self.base_radius;
+        }
+    }
+
+    /// Picks the gather radius (r₀, fixed after the first tick) and rebuilds the photon grid.
     fn rebuild_grid(&mut self, scene: &Scene, store: &PathStore) {
         let t = Instant::now();
-        let radius = if self.grid.radius > 0.0 { self.grid.radius } else { 1.0 };
+        let radius = if self.base_radius > 0.0 { self.base_radius } else { 1.0 };
         let first = PhotonGrid::build(scene, store, radius);
         let radius = match self.config.radius {
             Some(r) => r,
-            None if self.grid.radius > 0.0 => self.grid.radius,
+            None if self.base_radius > 0.0 => self.base_radius,
             None => {
                 let area: f32 = scene
                     .objects
@@ -427,6 +513,8 @@ impl PhotonReuse {
             }
         };
         self.grid = if radius == first.radius { first } else { PhotonGrid::build(scene, store, radius) };
+        self.base_radius = radius;
+        self.grid.radius = radius * self.shrink;
         self.pending.grid_ms = ms(t);
         self.pending.grid_rebuilt = true;
         self.pending.grid_added = self.grid.len() as u64;
@@ -434,19 +522,52 @@ impl PhotonReuse {
 
     /// Brings the grid up to date with the paths this tick changed: in place, unless so many
     /// changed that a rebuild is cheaper (`bench reuse` measures both; at a quarter of the paths
-    /// the update's per-photon inserts cost about what a parallel rebuild does).
-    fn refresh_grid(&mut self, scene: &Scene, store: &PathStore, mut touched: Vec<usize>) {
+    /// the update's per-photon inserts cost about what a parallel rebuild does). Returns the
+    /// photons an in-place update took out and put in, or `None` after a rebuild.
+    fn refresh_grid(&mut self, scene: &Scene, store: &PathStore, mut touched: Vec<usize>) -> Option<ChangedPhotons> {
         if self.grid.radius <= 0.0 || touched.len() * 4 > store.paths {
-            return self.rebuild_grid(scene, store);
+            self.rebuild_grid(scene, store);
+            return None;
         }
         let t = Instant::now();
         touched.par_sort_unstable();
         touched.dedup();
-        let u = self.grid.update(scene, store, &touched);
+        let (u, changed) = self.grid.update(scene, store, &touched);
         self.pending.grid_removed = u.removed;
         self.pending.grid_added = u.added;
         self.pending.grid_cells_touched = u.cells_touched;
         self.pending.grid_ms = ms(t);
+        Some(changed)
+    }
+
+    /// The render plan for a later tick: the kept pixels follow the change when the camera
+    /// stood still, no light or material changed, and the grid was updated in place
+    /// (`changed`; `None` after a rebuild).
+    fn plan(&mut self, scene: &Scene, delta: &SceneDelta, changed: Option<ChangedPhotons>) -> Plan {
+        if delta.camera {
+            self.pixels.clear();
+        }
+        // A refined still tick renders in full and keeps accumulating: its new photons are
+        // fresh samples of the same light, not a change.
+        let still = (delta.is_empty() && self.refined > 0)
+            || (delta.is_empty() && changed.as_ref().is_none_or(|c| c.removed.is_empty() && c.added.is_empty()));
+        let followable = self.pixels.gathered_at() == Some(self.grid.radius)
+            && delta.lights.is_empty()
+            && delta.materials.is_empty();
+        match changed {
+            Some(changed) if !still && followable => {
+                let mut moved = vec![false; scene.objects.len()];
+                let mut boxes = Vec::with_capacity(2 * delta.moved.len());
+                for m in &delta.moved {
+                    boxes.extend([m.old_bounds, m.new_bounds]);
+                    if let SurfaceId::Object(o) = m.surface {
+                        moved[o as usize] = true;
+                    }
+                }
+                Plan::Follow { changed, boxes, moved }
+            }
+            _ => Plan::Full,
+        }
     }
 }
 
@@ -461,13 +582,16 @@ impl Technique for PhotonReuse {
             None => {
                 let store = self.build(ctx);
                 self.rebuild_grid(ctx.scene, &store);
+                self.plan = Plan::Full;
                 self.store = Some(store);
             }
             Some(mut store) => {
                 let mut touched = Vec::new();
-                if self.update_paths(ctx, &mut store, delta, &mut touched) {
-                    self.refresh_grid(ctx.scene, &store, touched);
-                }
+                let changed = match self.update_paths(ctx, &mut store, delta, &mut touched) {
+                    true => self.refresh_grid(ctx.scene, &store, touched),
+                    false => Some(ChangedPhotons::default()),
+                };
+                self.plan = self.plan(ctx.scene, delta, changed);
                 self.store = Some(store);
             }
         }
@@ -494,21 +618,38 @@ impl Technique for PhotonReuse {
         Ok(())
     }
 
+    fn restarts_whole_film(&self, delta: &SceneDelta) -> bool {
+        !delta.is_empty() && matches!(self.plan, Plan::Full)
+    }
+
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
         let t = Instant::now();
-        let width = ctx.scene.camera.width as usize;
-        let grid = &self.grid;
-        let rays = film.accumulate_passes(
-            self.config.spp,
-            &mut self.passes,
-            width,
-            |pass, first, chunk| {
-                gather::render_chunk(ctx.scene, ctx.accel, grid, (ctx.seed, ctx.tick, pass), first, chunk)
-            },
-            gather::RenderRays::merge,
-        );
         let mut stats = std::mem::take(&mut self.pending);
+        let rays = match std::mem::take(&mut self.plan) {
+            Plan::Full => {
+                let mut rays = gather::RenderRays::default();
+                for _ in 0..self.config.spp {
+                    let stream = (ctx.seed, ctx.tick, self.passes);
+                    rays = rays.merge(self.pixels.full_pass(ctx.scene, ctx.accel, &self.grid, stream, film));
+                    self.passes += 1;
+                }
+                rays
+            }
+            Plan::Follow { changed, boxes, moved } => {
+                let scene = ctx.scene;
+                let lights: Vec<Aabb> = (0..scene.lights.len()).map(|l| edits::light_bounds(scene, l)).collect();
+                let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
+                let slack = BOX_SLACK * diagonal;
+                let moves = Moves { boxes: &boxes, moved: &moved, lights: &lights, slack };
+                let (counts, rays) =
+                    self.pixels.follow(scene, ctx.accel, &self.grid, &changed, &moves, (ctx.seed, ctx.tick), film);
+                stats.pixels = counts;
+                stats.followed = true;
+                rays
+            }
+        };
         stats.render_ms = t.elapsed().as_secs_f64() * 1e3;
+
         stats.camera_rays = rays.camera;
         stats.specular_rays = rays.specular;
         stats.shadow_rays = rays.shadow;
@@ -516,6 +657,7 @@ impl Technique for PhotonReuse {
         stats.grid_photons = self.grid.len() as u64;
         stats.grid_power = self.grid.power;
         stats.grid_bytes = self.grid.memory_bytes();
+        stats.pixel_bytes = self.pixels.memory_bytes();
         // Photon rays count by query: closest-hit (verification, retraces, fills) as secondary,
         // occlusion (primary-segment checks of moved lights) as shadow rays.
         let counts = RayCounts {

@@ -1,5 +1,6 @@
 //! Per-tick figures of `photon_reuse`: paths by fate, rays by kind, time by stage, memory by
 //! structure. Times in milliseconds, memory in bytes.
+use super::pixels::FollowCounts;
 use super::store::StoreMemory;
 use serde::{Deserialize, Serialize};
 
@@ -14,6 +15,8 @@ pub struct PhotonStats {
     pub pruned: u64,
     /// Emitted into cells below target.
     pub filled: u64,
+    /// Emitted afresh by this still tick's progressive refinement.
+    pub refined: u64,
     // Rays by kind.
     /// Occlusion rays checking the new primary segments of moved lights.
     pub origin_rays: u64,
@@ -57,9 +60,16 @@ pub struct PhotonStats {
     pub distribution_chi2: f64,
     /// Cells of the map with that χ² (its degrees of freedom + 1).
     pub distribution_cells: u64,
+    // The kept pixels.
+    /// This tick's render followed the change in the kept pixels instead of a full pass.
+    pub followed: bool,
+    /// What following did to the pixels (all zero after a full pass).
+    pub pixels: FollowCounts,
     // Memory.
     pub memory: StoreMemory,
     pub grid_bytes: u64,
+    /// The kept camera samples and their hit index.
+    pub pixel_bytes: u64,
 }
 
 impl PhotonStats {
