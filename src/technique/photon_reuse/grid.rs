@@ -423,11 +423,8 @@ impl PhotonGrid {
 mod tests {
     use super::PhotonGrid;
     use crate::embree::Device;
-    use crate::scene::edits::{self, SceneDelta};
-    use crate::scene::SceneAccel;
-    use crate::technique::photon_reuse::test_scenes::{cornell, edits_at};
-    use crate::technique::photon_reuse::{PhotonReuse, PhotonReuseConfig, ReuseMode};
-    use crate::technique::{RenderContext, Technique};
+    use crate::technique::photon_reuse::test_scenes::CornellRun;
+    use crate::technique::photon_reuse::ReuseMode;
 
     #[test]
     fn an_updated_grid_equals_a_rebuilt_one() {
@@ -437,25 +434,14 @@ mod tests {
         // store; and the update touched far fewer photons than the grid holds.
         let device = Device::new(2).expect("device");
         for reuse in [ReuseMode::Naive, ReuseMode::Error] {
-            let mut scene = cornell();
-            let mut accel = SceneAccel::build(&device, &scene).expect("accel");
-            let config = PhotonReuseConfig { paths: 20_000, reuse, ..PhotonReuseConfig::default() };
-            let mut technique = PhotonReuse::new(config, &scene).expect("technique");
+            let mut run = CornellRun::new(&device, reuse);
             let mut updated = 0;
             for tick in 0..8u32 {
-                let delta = if tick == 0 {
-                    SceneDelta::default()
-                } else {
-                    let batch = edits_at(&scene, tick);
-                    edits::apply(&mut scene, batch).expect("valid edits")
-                };
-                let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
-                accel.update_instances(&scene, &moved).expect("commit");
-                let ctx = RenderContext { scene: &scene, accel: &accel, seed: 3, tick: tick as u64 };
-                technique.update(&ctx, &delta).expect("update");
+                run.update(tick, 3);
+                let technique = &run.technique;
                 let store = technique.store.as_ref().expect("store");
                 let grid = &technique.grid;
-                let rebuilt = PhotonGrid::build(&scene, store, grid.radius);
+                let rebuilt = PhotonGrid::build(&run.scene, store, grid.radius);
                 assert_eq!(grid.len(), rebuilt.len(), "{reuse:?} tick {tick}");
                 assert!(grid.cell_keys() == rebuilt.cell_keys(), "{reuse:?} tick {tick}: cells differ");
                 assert_eq!(grid.power, rebuilt.power, "{reuse:?} tick {tick}");

@@ -314,11 +314,9 @@ fn footprint(scene: &Scene, s: &PixelSample) -> f32 {
 mod tests {
     use crate::embree::Device;
     use crate::film::Film;
-    use crate::scene::edits::{self, SceneDelta};
-    use crate::scene::SceneAccel;
-    use crate::technique::photon_reuse::test_scenes::{cornell, edits_at};
-    use crate::technique::photon_reuse::{PhotonReuse, PhotonReuseConfig, ReuseMode};
-    use crate::technique::{RenderContext, Technique, TechniqueStats};
+    use crate::technique::photon_reuse::test_scenes::CornellRun;
+    use crate::technique::photon_reuse::{PhotonReuse, ReuseMode};
+    use crate::technique::{Technique, TechniqueStats};
 
     /// The first pixel whose photon sum differs from a fresh gather at its hit by more than
     /// rounding (f64 sums of the same f32 terms in another order), if any.
@@ -340,39 +338,31 @@ mod tests {
         // before a followed tick's splat fail the same comparison.
         let device = Device::new(2).expect("device");
         for reuse in [ReuseMode::Naive, ReuseMode::Error] {
-            let mut scene = cornell();
-            let mut accel = SceneAccel::build(&device, &scene).expect("accel");
-            let config = PhotonReuseConfig { paths: 20_000, reuse, ..PhotonReuseConfig::default() };
-            let mut technique = PhotonReuse::new(config, &scene).expect("technique");
-            let mut film = Film::new(scene.camera.width, scene.camera.height);
+            let mut run = CornellRun::new(&device, reuse);
+            let mut film = Film::new(run.scene.camera.width, run.scene.camera.height);
             let (mut followed, mut stale_caught) = (0, 0);
             for tick in 0..10u32 {
-                let delta = match tick {
-                    0 => SceneDelta::default(),
-                    _ => {
-                        let batch = edits_at(&scene, tick);
-                        edits::apply(&mut scene, batch).expect("valid edits")
-                    }
+                run.update(tick, 5);
+                let before = run.technique.pixels.clone();
+                let ctx = crate::technique::RenderContext {
+                    scene: &run.scene,
+                    accel: &run.accel,
+                    seed: 5,
+                    tick: tick as u64,
                 };
-                let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
-                accel.update_instances(&scene, &moved).expect("commit");
-                let ctx = RenderContext { scene: &scene, accel: &accel, seed: 5, tick: tick as u64 };
-                technique.update(&ctx, &delta).expect("update");
-                let before = technique.pixels.clone();
-                let stats = technique.render(&ctx, &mut film).expect("render");
+                let stats = run.technique.render(&ctx, &mut film).expect("render");
                 let TechniqueStats::PhotonReuse(s) = stats.detail else { panic!("photon_reuse stats") };
-                assert_eq!(first_mismatch(&technique, &scene), None, "{reuse:?} tick {tick}");
+                let (technique, scene) = (&mut run.technique, &run.scene);
+                assert_eq!(first_mismatch(technique, scene), None, "{reuse:?} tick {tick}");
                 if s.followed {
                     followed += 1;
                     assert!(
                         s.pixels.splat_terms > 0,
-                        "{reuse:?} tick {tick}: a move that splatted nothing: {:?} {} {}",
-                        s.pixels,
-                        s.grid_removed,
-                        s.grid_added
+                        "{reuse:?} tick {tick}: a move that splatted nothing: {:?}",
+                        s.pixels
                     );
                     let after = std::mem::replace(&mut technique.pixels, before);
-                    stale_caught += usize::from(first_mismatch(&technique, &scene).is_some());
+                    stale_caught += usize::from(first_mismatch(technique, scene).is_some());
                     technique.pixels = after;
                 }
             }

@@ -42,3 +42,37 @@ pub fn edits_at(scene: &Scene, tick: u32) -> Vec<Edit> {
     }
     edits
 }
+
+/// A `photon_reuse` technique driven tick by tick over [`cornell`] and [`edits_at`], the way
+/// the engine drives it (apply, commit, update), without an engine in between.
+pub struct CornellRun {
+    pub scene: Scene,
+    pub accel: crate::scene::SceneAccel,
+    pub technique: super::PhotonReuse,
+}
+
+impl CornellRun {
+    pub fn new(device: &crate::embree::Device, reuse: super::ReuseMode) -> CornellRun {
+        let scene = cornell();
+        let accel = crate::scene::SceneAccel::build(device, &scene).expect("accel");
+        let config = super::PhotonReuseConfig { paths: 20_000, reuse, ..super::PhotonReuseConfig::default() };
+        let technique = super::PhotonReuse::new(config, &scene).expect("technique");
+        CornellRun { scene, accel, technique }
+    }
+
+    /// Applies tick `tick`'s edits (none on tick 0), commits them and updates the technique.
+    pub fn update(&mut self, tick: u32, seed: u64) {
+        use crate::technique::Technique;
+        let delta = match tick {
+            0 => crate::scene::edits::SceneDelta::default(),
+            _ => {
+                let batch = edits_at(&self.scene, tick);
+                crate::scene::edits::apply(&mut self.scene, batch).expect("valid edits")
+            }
+        };
+        let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
+        self.accel.update_instances(&self.scene, &moved).expect("commit");
+        let ctx = crate::technique::RenderContext { scene: &self.scene, accel: &self.accel, seed, tick: tick as u64 };
+        self.technique.update(&ctx, &delta).expect("update");
+    }
+}
