@@ -106,8 +106,8 @@ impl PhotonReuse {
         }
         // A refined still tick renders in full and keeps accumulating: its new photons are
         // fresh samples of the same light, not a change.
-        let still = (delta.is_empty() && self.refined > 0)
-            || (delta.is_empty() && changed.as_ref().is_none_or(|c| c.removed.is_empty() && c.added.is_empty()));
+        let still = delta.is_empty()
+            && (self.refined > 0 || changed.as_ref().is_none_or(|c| c.removed.is_empty() && c.added.is_empty()));
         let followable = self.pixels.gathered_at() == Some(self.grid.radius)
             && delta.lights.is_empty()
             && delta.materials.is_empty();

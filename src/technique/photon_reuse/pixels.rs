@@ -118,12 +118,9 @@ impl PixelCache {
         self.radius = grid.radius;
         let (samples, k) = (&self.samples, grid.kernel_area() as f64);
         let width = scene.camera.width as usize;
-        let mut ignored = 0;
-        film.accumulate_passes(
-            1,
-            &mut ignored,
+        film.accumulate_chunks(
             width,
-            |_, first, chunk| {
+            |first, chunk| {
                 for (offset, pixel) in chunk.iter_mut().enumerate() {
                     pixel.add(samples[first + offset].value(k));
                     pixel.count += 1.0;
@@ -131,6 +128,7 @@ impl PixelCache {
             },
             |_, _| (),
         );
+        film.passes += 1;
         rays
     }
 
