@@ -82,19 +82,8 @@ impl BoxTree {
         if self.nodes.is_empty() {
             return (false, 0);
         }
-        // With no zero component the reciprocal direction serves every box; otherwise the exact
-        // per-axis test handles the parallel slabs.
-        let fast = dir.x != 0.0 && dir.y != 0.0 && dir.z != 0.0;
-        let (o, inv) = (Vec3A::from(origin), Vec3A::ONE / Vec3A::from(dir));
-        let touches = |b: &Aabb| {
-            if fast {
-                let t0 = (Vec3A::from(b.min) - o) * inv;
-                let t1 = (Vec3A::from(b.max) - o) * inv;
-                t0.min(t1).max_element().max(0.0) <= t0.max(t1).min_element().min(t_max)
-            } else {
-                segment_hits_box(origin, dir, t_max, b)
-            }
-        };
+        let segment = Segment::new(origin, dir, t_max);
+        let touches = |b: &Aabb| segment.touches(b);
         let mut stack = [0u32; 64];
         let mut top = 1;
         let mut tests = 0u64;
@@ -126,6 +115,28 @@ impl BoxTree {
 }
 
 impl BoxTree {
+    /// At most `n` boxes (n ≥ 1) that together cover every box: the boxes themselves when there
+    /// are no more than `n`, otherwise the bounds of the tree's top nodes, opened widest first.
+    /// A segment that touches a box touches the cover, so the cover is a conservative pre-test.
+    pub fn cover(&self, n: usize) -> Vec<Aabb> {
+        if self.boxes.len() <= n {
+            return self.boxes.clone();
+        }
+        let extent = |i: u32| {
+            let b = self.nodes[i as usize].bounds;
+            (b.max - b.min).length_squared()
+        };
+        let mut front = vec![0u32];
+        while front.len() < n {
+            let inner = front.iter().enumerate().filter(|(_, &i)| self.nodes[i as usize].count == 0);
+            let Some((at, &widest)) = inner.max_by(|a, b| extent(*a.1).total_cmp(&extent(*b.1))) else { break };
+            let first = self.nodes[widest as usize].first;
+            front[at] = first;
+            front.push(first + 1);
+        }
+        front.iter().map(|&i| self.nodes[i as usize].bounds).collect()
+    }
+
     /// Does any box overlap `query` (touching counts)?
     pub fn overlaps(&self, query: &Aabb) -> bool {
         let meets = |b: &Aabb| b.min.cmple(query.max).all() && query.min.cmple(b.max).all();
@@ -144,6 +155,39 @@ impl BoxTree {
             }
         }
         false
+    }
+}
+
+/// A segment prepared for many box tests: with no zero component of the direction, one
+/// reciprocal serves every box; otherwise the exact per-axis test handles the parallel slabs.
+/// Both tests are monotone in the box, so a box that contains another is touched whenever the
+/// inner one is.
+#[derive(Clone, Copy, Debug)]
+pub struct Segment {
+    origin: Vec3,
+    dir: Vec3,
+    t_max: f32,
+    o: Vec3A,
+    inv: Vec3A,
+    fast: bool,
+}
+
+impl Segment {
+    pub fn new(origin: Vec3, dir: Vec3, t_max: f32) -> Segment {
+        let fast = dir.x != 0.0 && dir.y != 0.0 && dir.z != 0.0;
+        Segment { origin, dir, t_max, o: Vec3A::from(origin), inv: Vec3A::ONE / Vec3A::from(dir), fast }
+    }
+
+    /// Does the segment touch `b`?
+    #[inline]
+    pub fn touches(&self, b: &Aabb) -> bool {
+        if self.fast {
+            let t0 = (Vec3A::from(b.min) - self.o) * self.inv;
+            let t1 = (Vec3A::from(b.max) - self.o) * self.inv;
+            t0.min(t1).max_element().max(0.0) <= t0.max(t1).min_element().min(self.t_max)
+        } else {
+            segment_hits_box(self.origin, self.dir, self.t_max, b)
+        }
     }
 }
 

@@ -67,8 +67,7 @@ fn within(new: Rgb, old: Rgb, threshold: f32) -> bool {
     ok(new.r, old.r) && ok(new.g, old.g) && ok(new.b, old.b)
 }
 
-/// Runs Algorithm 1 on `path`. `first_verified`: segment 0 was already checked against the full
-/// scene (its light moved).
+/// Runs Algorithm 1 on `path`. `mask`: the screen's bits (segments that need the box tree).
 pub fn check_path(
     scene: &Scene,
     accel: &SceneAccel,
@@ -76,7 +75,7 @@ pub fn check_path(
     path: usize,
     changes: &Changes,
     threshold: f32,
-    first_verified: bool,
+    mask: u16,
 ) -> Checked {
     let photons = store.word[path].photons();
     let escape = store.escape[path];
@@ -106,8 +105,7 @@ pub fn check_path(
                 false => escape,
             })
         };
-        let (crossed, tests) =
-            if k == 0 && first_verified { (false, 0) } else { changes.boxes.hits(start, dir, t_max) };
+        let (crossed, tests) = changes.crosses(mask, k, start, dir, t_max);
         out.tests += tests;
         let end_moved = stored_end.is_some_and(|(_, o)| changes.moved[o as usize]);
         let start_on_moved = start_object.is_some_and(|o| changes.moved[o as usize]);

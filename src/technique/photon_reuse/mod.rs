@@ -93,11 +93,11 @@ pub use grid::{ChangedPhotons, GridUpdate, PhotonGrid};
 pub use stats::PhotonStats;
 pub use store::{PathStore, PathWord, StoreMemory};
 
-use super::box_tree::{BoxTree, BOX_SLACK};
+use super::box_tree::BOX_SLACK;
 use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
 use crate::film::Film;
 use crate::scene::edits::{self, Aabb, SceneDelta};
-use crate::scene::{Scene, SurfaceId};
+use crate::scene::Scene;
 use distribution::EmissionFrame;
 use glam::Affine3A;
 use lights::{MappedLight, Moved};
@@ -105,18 +105,7 @@ use pixels::{Moves, PixelCache};
 use rayon::prelude::*;
 use std::time::Instant;
 use trace::{Retrace, TracedTail, Tracer};
-use verify::Changes;
-
-/// Where a path stands during one tick's verification.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Standing {
-    /// Not looked at yet.
-    Unchecked,
-    /// Its light moved and the new primary segment was checked against the full scene.
-    FirstVerified,
-    /// Already invalid or scheduled; verification skips it.
-    Decided,
-}
+use verify::{Changes, Standing};
 
 /// How this tick's render goes, as `update` found it: handed to `render` and spent there.
 #[derive(Debug, Default)]
@@ -400,32 +389,20 @@ impl PhotonReuse {
         touched: &mut Vec<usize>,
     ) -> bool {
         let scene = ctx.scene;
-        let mut boxes = Vec::new();
-        let mut moved = vec![false; scene.objects.len()];
-        for m in &delta.moved {
-            boxes.push(m.old_bounds);
-            boxes.push(m.new_bounds);
-            if let SurfaceId::Object(o) = m.surface {
-                moved[o as usize] = true;
-            }
-        }
-        let previous_material = scene
-            .objects
-            .iter()
-            .map(|o| {
-                let at = delta.materials.iter().position(|&m| m == o.material as usize)?;
-                delta.previous_materials.get(at).cloned()
-            })
-            .collect();
-        let changes = Changes { boxes: BoxTree::new(boxes), moved, previous_material };
-        let todo = || (0..store.paths).into_par_iter().filter(|&i| standing[i] != Standing::Decided);
-        let first_verified = |i: usize| standing[i] == Standing::FirstVerified;
+        let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
+        let changes = Changes::new(scene, delta, BOX_SLACK * diagonal);
+        let t = Instant::now();
+        let (screened, screen_tests) = verify::screen(scene, store, &changes, standing);
+        self.pending.screen_ms = ms(t);
+        self.pending.screened = screened.len() as u64;
+        self.pending.verify_box_tests += screen_tests;
+        let todo = || screened.par_iter().map(|&(i, mask)| (i as usize, mask));
         if self.config.reuse == ReuseMode::Naive {
             let (tests, failed) = todo()
                 .fold(
                     || (0u64, Vec::new()),
-                    |(tests, mut failed), i| {
-                        let (retrace, made) = verify::check_path(scene, store, i, &changes, first_verified(i));
+                    |(tests, mut failed), (i, mask)| {
+                        let (retrace, made) = verify::check_path(scene, store, i, &changes, mask);
                         failed.extend(retrace.map(|r| (i, r)));
                         (tests + made, failed)
                     },
@@ -441,8 +418,8 @@ impl PhotonReuse {
         let (tests, rays, decided) = todo()
             .fold(
                 || (0u64, 0u64, Vec::new()),
-                |(tests, rays, mut decided), i| {
-                    let c = error::check_path(scene, ctx.accel, store, i, &changes, threshold, first_verified(i));
+                |(tests, rays, mut decided), (i, mask)| {
+                    let c = error::check_path(scene, ctx.accel, store, i, &changes, threshold, mask);
                     let (t, r) = (c.tests, c.rays);
                     if c.outcome != error::Outcome::Valid || !c.moved.is_empty() {
                         decided.push((i, c));

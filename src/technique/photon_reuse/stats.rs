@@ -29,13 +29,17 @@ pub struct PhotonStats {
     pub camera_rays: u64,
     pub specular_rays: u64,
     pub shadow_rays: u64,
-    /// Segment-against-box tests made by verification.
+    /// Segment-against-box tests made by verification (the screen's cover tests included).
     pub verify_box_tests: u64,
+    /// Paths the bounce-row screen passed on to the per-path checks (the rest are valid).
+    pub screened: u64,
     // Time by stage.
     /// Update origins of moved lights, with their primary-segment rays, and count DM_C.
     pub origins_ms: f64,
     /// Dynamic occlusions: verification against moved surfaces and edited materials.
     pub verify_ms: f64,
+    /// The bounce-row screen, part of `verify_ms`.
+    pub screen_ms: f64,
     pub prune_ms: f64,
     /// Tracing the filled paths.
     pub fill_ms: f64,

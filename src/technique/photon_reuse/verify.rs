@@ -1,35 +1,192 @@
 //! Verifying stored paths against what changed this tick (naive mode, Moreau et al. §3.2), and
-//! the box tests both modes share.
+//! the screen and box tests both modes share.
 //!
 //! Segments are tested in order from the light against the world AABBs of every surface that
-//! moved, both where it was and where it is (a slab test; conservative, so false positives only
-//! cost a retrace). The first segment that may be crossed, or that ends on a moved object, is
-//! retraced along with everything after it. A photon on an object whose material changed keeps
-//! its arrival flux, but everything it reflected is retraced.
+//! moved, both where it was and where it is, widened by `BOX_SLACK` of the scene's diagonal (a
+//! slab test; conservative, so false positives only cost a retrace). The first segment that may
+//! be crossed, or that ends on a moved object, is retraced along with everything after it. A
+//! photon on an object whose material changed keeps its arrival flux, but everything it
+//! reflected is retraced.
+//!
+//! **The screen** (§4's bounce-major layout put to use): before any path is looked at on its
+//! own, one pass per bounce row tests segment k of every path against a cover of at most
+//! `COVER_BOXES` boxes that contains every moved box, and against a per-object flag (moved, or
+//! its material edited). The pass reads each row's positions and objects in order, so it runs
+//! at memory speed. It gives every path a mask: bit k set when segment k needs the exact tests.
+//! A path with no bit set is valid in both modes, exactly (the cover contains every box and the
+//! slab test is monotone in the box), and is never looked at again; a path with bits set is
+//! checked segment by segment, and segments without their bit skip the box tree.
 use super::store::PathStore;
 use super::trace::{path_origin, Retrace};
-use crate::scene::{Material, Scene};
-use crate::technique::box_tree::BoxTree;
+use crate::scene::edits::Aabb;
+use crate::scene::edits::SceneDelta;
+use crate::scene::{Material, Scene, SurfaceId};
+use crate::technique::box_tree::{widened, BoxTree, Segment};
 use glam::Vec3;
+use rayon::prelude::*;
+
+/// Boxes in the screen's cover: enough to keep several separate movers apart, few enough that
+/// testing all of them per segment stays cheaper than walking the tree.
+const COVER_BOXES: usize = 8;
+
+/// Paths per task of the screen: a chunk's masks stay in cache while its rows stream past.
+const SCREEN_CHUNK: usize = 4096;
+
+/// Where a path stands during one tick's verification.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Standing {
+    /// Not looked at yet.
+    Unchecked,
+    /// Its light moved and the new primary segment was checked against the full scene.
+    FirstVerified,
+    /// Already invalid or scheduled; verification skips it.
+    Decided,
+}
 
 /// What changed this tick, prepared for fast per-segment tests.
 pub struct Changes {
-    /// Old and new world bounds of moved surfaces.
+    /// Old and new world bounds of moved surfaces, widened by the slack.
     pub boxes: BoxTree,
+    /// At most `COVER_BOXES` boxes containing all of `boxes`.
+    cover: Vec<Aabb>,
     /// `moved[object]`: the object moved this tick.
     pub moved: Vec<bool>,
     /// `previous_material[object]`: the object's material before this tick's edit, if edited.
     pub previous_material: Vec<Option<Material>>,
+    /// `flagged[object]`: moved or its material edited (a segment ending on it needs a look).
+    flagged: Vec<bool>,
+}
+
+impl Changes {
+    /// This tick's moves and material edits; boxes are widened by `slack` (meters).
+    pub fn new(scene: &Scene, delta: &SceneDelta, slack: f32) -> Changes {
+        let mut boxes = Vec::new();
+        let mut moved = vec![false; scene.objects.len()];
+        for m in &delta.moved {
+            boxes.push(widened(&m.old_bounds, slack));
+            boxes.push(widened(&m.new_bounds, slack));
+            if let SurfaceId::Object(o) = m.surface {
+                moved[o as usize] = true;
+            }
+        }
+        let previous_material: Vec<Option<Material>> = scene
+            .objects
+            .iter()
+            .map(|o| {
+                let at = delta.materials.iter().position(|&m| m == o.material as usize)?;
+                delta.previous_materials.get(at).cloned()
+            })
+            .collect();
+        let flagged = moved.iter().zip(&previous_material).map(|(&m, p)| m || p.is_some()).collect();
+        let boxes = BoxTree::new(boxes);
+        let cover = boxes.cover(COVER_BOXES);
+        Changes { boxes, cover, moved, previous_material, flagged }
+    }
+
+    /// Whether the segment from `start` to `end` may touch the cover. A finite segment lies in
+    /// the box of its ends, and most miss every cover box there, without a division.
+    #[inline]
+    fn cover_touched(&self, start: Vec3, end: Vec3) -> bool {
+        let (lo, hi) = (start.min(end), start.max(end));
+        let near = self.cover.iter().any(|b| b.min.cmple(hi).all() && lo.cmple(b.max).all());
+        near && {
+            let segment = Segment::new(start, end - start, 1.0);
+            self.cover.iter().any(|b| segment.touches(b))
+        }
+    }
+
+    /// Whether segment k (its bit in `mask`) may cross a moved box, and the box tests made.
+    pub fn crosses(&self, mask: u16, k: u32, start: Vec3, dir: Vec3, t_max: f32) -> (bool, u64) {
+        if mask & (1 << k) == 0 {
+            return (false, 0);
+        }
+        self.boxes.hits(start, dir, t_max)
+    }
+}
+
+/// The screen: every path not yet decided whose mask has a bit set, with that mask, and the
+/// segments it tested against the cover. Bit k: segment k touches the cover (not tested for segment 0 when the
+/// light's new primary segment was already verified) or ends on a flagged object.
+pub fn screen(scene: &Scene, store: &PathStore, changes: &Changes, standing: &[Standing]) -> (Vec<(u32, u16)>, u64) {
+    let mut masks = vec![0u16; store.paths];
+    let tests: u64 = masks
+        .par_chunks_mut(SCREEN_CHUNK)
+        .enumerate()
+        .map(|(c, masks)| screen_chunk(scene, store, changes, standing, c * SCREEN_CHUNK, masks))
+        .sum();
+    let flagged = masks.into_par_iter().enumerate().filter(|&(_, m)| m != 0).map(|(i, m)| (i as u32, m)).collect();
+    (flagged, tests)
+}
+
+/// The screen over paths `first..first + masks.len()`, one bounce row at a time, then the
+/// escape segments.
+fn screen_chunk(
+    scene: &Scene,
+    store: &PathStore,
+    changes: &Changes,
+    standing: &[Standing],
+    first: usize,
+    masks: &mut [u16],
+) -> u64 {
+    let range = first..first + masks.len();
+    let words = &store.word[range.clone()];
+    let standing = &standing[range.clone()];
+    let origins: Vec<Vec3> = range.clone().map(|i| path_origin(scene, store, i)).collect();
+    let mut tests = 0u64;
+    for k in 0..store.max_photons.min(15) {
+        let starts = if k == 0 { &origins[..] } else { &store.rows[k - 1].position[range.clone()] };
+        let row = &store.rows[k];
+        let ends = row.position[range.clone()].iter().zip(&row.object[range.clone()]);
+        for ((((mask, word), &start), (&end, &object)), standing) in
+            masks.iter_mut().zip(words).zip(starts).zip(ends).zip(standing)
+        {
+            if k >= word.photons() as usize {
+                continue;
+            }
+            if changes.flagged[object as usize] {
+                *mask |= 1 << k;
+                continue;
+            }
+            // Segment 0 of a moved light's kept path was checked against the whole scene.
+            if k == 0 && *standing == Standing::FirstVerified {
+                continue;
+            }
+            tests += 1;
+            if changes.cover_touched(start, end) {
+                *mask |= 1 << k;
+            }
+        }
+    }
+    for (j, mask) in masks.iter_mut().enumerate() {
+        let i = first + j;
+        let photons = words[j].photons() as usize;
+        let escape = store.escape[i];
+        if escape == Vec3::ZERO || (photons == 0 && standing[j] == Standing::FirstVerified) {
+            continue;
+        }
+        let start = if photons == 0 { origins[j] } else { store.rows[photons - 1].position[i] };
+        let segment = Segment::new(start, escape, f32::INFINITY);
+        tests += 1;
+        if changes.cover.iter().any(|b| segment.touches(b)) {
+            *mask |= 1 << photons;
+        }
+    }
+    for (mask, standing) in masks.iter_mut().zip(standing) {
+        if *standing == Standing::Decided {
+            *mask = 0;
+        }
+    }
+    tests
 }
 
 /// The retrace a path needs, or `None` if it is still valid. Also returns the box tests made.
-/// `first_verified`: segment 0 was already checked against the full scene (its light moved).
+/// `mask`: the screen's bits (segments that need the box tree).
 pub fn check_path(
     scene: &Scene,
     store: &PathStore,
     path: usize,
     changes: &Changes,
-    first_verified: bool,
+    mask: u16,
 ) -> (Option<Retrace>, u64) {
     let photons = store.word[path].photons();
     let escaped = store.escape[path] != Vec3::ZERO;
@@ -45,7 +202,7 @@ pub fn check_path(
             (store.escape[path], f32::INFINITY)
         };
         // A moved surface may now cross the segment (where it was, or where it is).
-        let (crossed, made) = if k == 0 && first_verified { (false, 0) } else { changes.boxes.hits(start, dir, t_max) };
+        let (crossed, made) = changes.crosses(mask, k, start, dir, t_max);
         tests += made;
         if crossed {
             return (Some(Retrace::KeepSegment(k)), tests);
@@ -66,4 +223,84 @@ pub fn check_path(
         }
     }
     (None, tests)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::embree::Device;
+    use crate::technique::photon_reuse::test_scenes::{edits_at, CornellRun};
+    use crate::technique::photon_reuse::ReuseMode;
+
+    /// Paths whose verdict with the screen's mask differs from the verdict with every segment
+    /// tested against the box tree (a screened-out path counts as valid).
+    fn disagreements(scene: &Scene, store: &PathStore, changes: &Changes) -> usize {
+        let standing = vec![Standing::Unchecked; store.paths];
+        let (screened, _) = screen(scene, store, changes, &standing);
+        let mut masks = vec![0u16; store.paths];
+        for (i, m) in screened {
+            masks[i as usize] = m;
+        }
+        (0..store.paths)
+            .filter(|&i| {
+                let screened = if masks[i] == 0 { None } else { check_path(scene, store, i, changes, masks[i]).0 };
+                screened != check_path(scene, store, i, changes, u16::MAX).0
+            })
+            .count()
+    }
+
+    #[test]
+    fn the_screen_passes_on_every_path_the_box_tree_would_retrace() {
+        // Property: over the moves of the Cornell animation, screening first changes no
+        // path's verdict. Negative control: a cover that leaves out where the block was.
+        let device = Device::new(2).expect("device");
+        let mut run = CornellRun::new(&device, ReuseMode::Naive);
+        let (mut retraced, mut caught) = (0, 0);
+        for tick in 0..6u32 {
+            if tick > 0 {
+                let batch = edits_at(&run.scene, tick);
+                let delta = crate::scene::edits::apply(&mut run.scene, batch).expect("edits");
+                let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
+                run.accel.update_instances(&run.scene, &moved).expect("commit");
+                let store = run.technique.store.as_ref().expect("store");
+                let mut changes = Changes::new(&run.scene, &delta, 1e-3);
+                assert_eq!(disagreements(&run.scene, store, &changes), 0, "tick {tick}");
+                retraced += (0..store.paths)
+                    .filter(|&i| check_path(&run.scene, store, i, &changes, u16::MAX).0.is_some())
+                    .count();
+                changes.cover = vec![widened(&delta.moved[0].new_bounds, 1e-3)];
+                caught += usize::from(disagreements(&run.scene, store, &changes) > 0);
+                let ctx = crate::technique::RenderContext {
+                    scene: &run.scene,
+                    accel: &run.accel,
+                    seed: 3,
+                    tick: tick as u64,
+                };
+                crate::technique::Technique::update(&mut run.technique, &ctx, &delta).expect("update");
+            } else {
+                run.update(0, 3);
+            }
+        }
+        assert!(retraced > 100, "the moves invalidated only {retraced} paths: a weak test");
+        assert_eq!(caught, 5, "a cover missing the old box went unnoticed");
+    }
+
+    #[test]
+    fn the_cover_contains_every_box() {
+        let mut rng = crate::core::Rng::new(9, 1);
+        let mut v = || rng.next_f32() * 10.0;
+        let boxes: Vec<Aabb> = (0..37)
+            .map(|_| {
+                let c = Vec3::new(v(), v(), v());
+                Aabb { min: c, max: c + Vec3::splat(0.5) }
+            })
+            .collect();
+        let tree = BoxTree::new(boxes.clone());
+        for n in [1, 2, 5, 8, 40] {
+            let cover = tree.cover(n);
+            assert!(cover.len() <= n.max(1) && !cover.is_empty(), "{n}: {} boxes", cover.len());
+            let inside = |b: &Aabb| cover.iter().any(|c| c.min.cmple(b.min).all() && b.max.cmple(c.max).all());
+            assert!(boxes.iter().all(inside), "cover of {n} leaves a box out");
+        }
+    }
 }
