@@ -4,7 +4,7 @@
 //! - `relume render SCENE.json --technique path --spp N --out FILE.(png|jpg|exr)`
 //! - `relume render SCENE.json --anim NAME.anim.json --frames N --out DIR/`
 //! - `relume bench rays SCENE.json [--json FILE]`
-//! - `relume bench reuse SCENE.json --anim NAME.anim.json --frames F [--paths N] [--json FILE]`
+//! - `relume bench reuse SCENE.json --anim NAME.anim.json --frames F [--paths N[,N2…]] [--json FILE]`
 //! - `relume bench icache SCENE.json --anim NAME.anim.json --frames F [--vpls N] [--audit] [--json FILE]`
 //! - `relume bench particles SCENE.json [--anim NAME.anim.json --frames F] [--particles N] [--json FILE]`
 //! - `relume bench error SCENE.json [--anim NAME.anim.json --frames F --every K] --techniques LIST [--ref-spp S] [--out DIR]`

@@ -168,3 +168,43 @@ async fn framework_errors_have_the_json_error_body_too() {
     }
     s.shutdown().await.unwrap();
 }
+
+/// An inline scene of `objects` spheres of `segments` and `lights` point lights.
+fn inline_scene(objects: usize, segments: u32, lights: usize) -> Value {
+    let objects: Vec<Value> = (0..objects)
+        .map(|i| json!({"name": format!("s{i}"), "shape": {"type": "sphere", "segments": segments}, "material": "white"}))
+        .collect();
+    let lights: Vec<Value> = (0..lights)
+        .map(|i| json!({"name": format!("l{i}"), "emitter": {"type": "point", "intensity": [1, 1, 1]}, "transform": {"translation": [0, 3, 0]}}))
+        .collect();
+    json!({
+        "camera": {"position": [0, 0, -5], "look_at": [0, 0, 0], "vfov_deg": 40, "resolution": [16, 16]},
+        "materials": {"white": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+        "objects": objects,
+        "lights": lights
+    })
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn meshes_objects_and_lights_are_counted_before_anything_is_built() {
+    // Hazard: meshes were built and then counted, so a small body of finely tessellated spheres
+    // cost seconds of CPU, and a few hundred would exhaust memory, before the 413. Built first,
+    // this scene's 300 spheres of 4096 segments (5·10⁹ triangles) could not come back at all.
+    let s = TestServer::start(None, Limits::default()).await;
+    let (status, body) = post(&s, "/v1/sessions", json!({"scene": inline_scene(300, 4096, 1)})).await;
+    assert_eq!(status, 413, "{body}");
+    let detail = body["detail"].as_str().unwrap_or_default();
+    assert!(detail.contains("scene.objects") && detail.contains("triangles"), "{body}");
+    let limits = Limits::default();
+    let (status, body) = post(&s, "/v1/sessions", json!({"scene": inline_scene(limits.max_objects + 1, 3, 1)})).await;
+    assert_eq!(status, 413, "{body}");
+    assert!(body["detail"].as_str().unwrap_or_default().contains("objects exceed"), "{body}");
+    let (status, body) = post(&s, "/v1/sessions", json!({"scene": inline_scene(1, 8, limits.max_lights + 1)})).await;
+    assert_eq!(status, 413, "{body}");
+    assert!(body["detail"].as_str().unwrap_or_default().contains("scene.lights"), "{body}");
+    assert_eq!(s.state.session_count(), 0);
+    // The same scenes within the limits load.
+    let (status, body) = post(&s, "/v1/sessions", json!({"scene": inline_scene(3, 64, limits.max_lights)})).await;
+    assert_eq!(status, 201, "{body}");
+    s.shutdown().await.unwrap();
+}

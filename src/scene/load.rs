@@ -19,6 +19,90 @@ pub enum SceneError {
     Io { path: String, message: String },
     #[error("{field}: {message}")]
     Invalid { field: String, message: String },
+    /// Over a [`SceneBudget`]: found before anything was built.
+    #[error("{field}: {message}")]
+    TooLarge { field: String, message: String },
+}
+
+/// What a scene may hold, checked from the description (shape parameters and OBJ face
+/// counts) before any mesh is built.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SceneBudget {
+    pub max_triangles: u64,
+    pub max_objects: usize,
+    /// At most 65 536: `photon_reuse` stores a path's light in 16 bits.
+    pub max_lights: usize,
+}
+
+impl Default for SceneBudget {
+    /// Bounds for local use (the CLI); the server passes its own, tighter limits.
+    fn default() -> SceneBudget {
+        SceneBudget { max_triangles: 64_000_000, max_objects: 100_000, max_lights: 4096 }
+    }
+}
+
+/// Triangles the description's objects and light shapes will make, counted without making
+/// them. Mesh paths are resolved (and confined to `root`) as the build will resolve them.
+pub fn count_triangles(desc: &SceneDesc, scene_dir: &Path, root: &Path) -> Result<u64, SceneError> {
+    let mut files: std::collections::HashMap<PathBuf, u64> = Default::default();
+    let mut total = 0u64;
+    for (i, o) in desc.objects.iter().enumerate() {
+        total += match &o.shape {
+            ShapeDesc::Mesh { path } => {
+                let field = format!("objects[{i}].shape.path");
+                let file = resolve_mesh_path(&field, path, scene_dir, root)?;
+                match files.get(&file) {
+                    Some(&n) => n,
+                    None => {
+                        let n = Mesh::count_obj_triangles(&file).map_err(|e| invalid(&field, e))?;
+                        files.insert(file, n);
+                        n
+                    }
+                }
+            }
+            ShapeDesc::Quad => 2,
+            ShapeDesc::Box => 12,
+            ShapeDesc::Sphere { segments } => Mesh::sphere_triangles(*segments),
+            ShapeDesc::Disc { segments } => Mesh::disc_triangles(*segments),
+            ShapeDesc::Cylinder { segments } => Mesh::cylinder_triangles(*segments),
+        };
+    }
+    for l in &desc.lights {
+        total += match &l.emitter {
+            EmitterDesc::Rect { .. } => 2,
+            EmitterDesc::Disc { segments, .. } => Mesh::disc_triangles(*segments),
+            EmitterDesc::Point { .. } | EmitterDesc::Spot { .. } => 0,
+        };
+    }
+    Ok(total)
+}
+
+/// Refuses a description over `budget`, naming the field, before anything is built.
+pub fn check_budget(desc: &SceneDesc, scene_dir: &Path, root: &Path, budget: &SceneBudget) -> Result<(), SceneError> {
+    let too_large = |field: &str, message: String| SceneError::TooLarge { field: field.into(), message };
+    if desc.objects.len() > budget.max_objects {
+        return Err(too_large(
+            "objects",
+            format!("{} objects exceed the limit of {}", desc.objects.len(), budget.max_objects),
+        ));
+    }
+    if desc.lights.len() > budget.max_lights {
+        return Err(too_large(
+            "lights",
+            format!("{} lights exceed the limit of {}", desc.lights.len(), budget.max_lights),
+        ));
+    }
+    let triangles = count_triangles(desc, scene_dir, root)?;
+    if triangles > budget.max_triangles {
+        return Err(too_large(
+            "objects",
+            format!(
+                "{triangles} triangles (from the shapes' segments and the OBJ files' faces) exceed the limit of {}",
+                budget.max_triangles
+            ),
+        ));
+    }
+    Ok(())
 }
 
 pub(crate) fn invalid(field: impl Into<String>, message: impl Into<String>) -> SceneError {
@@ -213,14 +297,16 @@ fn check_name<'a>(
 /// Degenerate triangles dropped at load: (object name, count).
 pub type DroppedTriangles = Vec<(String, usize)>;
 
-/// Validates the description and builds each object's mesh; `meshes[i]` belongs to
-/// `desc.objects[i]`. Degenerate triangles are dropped and counted.
+/// Validates the description against `budget` and builds each object's mesh; `meshes[i]`
+/// belongs to `desc.objects[i]`. Degenerate triangles are dropped and counted.
 pub fn validate_and_build_meshes(
     desc: &SceneDesc,
     scene_dir: &Path,
     root: &Path,
+    budget: &SceneBudget,
 ) -> Result<(Vec<Mesh>, DroppedTriangles), SceneError> {
     validate_camera(&desc.camera)?;
+    check_budget(desc, scene_dir, root, budget)?;
     for (name, m) in &desc.materials {
         validate_material(&format!("materials.{name}"), m)?;
     }

@@ -17,7 +17,7 @@ pub mod shapes;
 pub use accel::SceneAccel;
 pub use camera::Camera;
 pub use light::{IncidentSample, LightGeometry};
-pub use load::SceneError;
+pub use load::{SceneBudget, SceneError};
 pub use model::{CameraDesc, EmitterDesc, LightDesc, Material, ObjectDesc, SceneDesc, ShapeDesc, Trs};
 pub use shapes::Mesh;
 
@@ -98,16 +98,31 @@ fn mesh_area(positions: &[Vec3], mesh: &Mesh) -> f32 {
 impl Scene {
     /// Loads a scene file; meshes must lie inside `root` (the scenes folder).
     pub fn load(path: &Path, root: &Path) -> Result<Scene, SceneError> {
+        Scene::load_within(path, root, &SceneBudget::default())
+    }
+
+    /// [`Scene::load`] refusing, before building anything, a scene over `budget`.
+    pub fn load_within(path: &Path, root: &Path, budget: &SceneBudget) -> Result<Scene, SceneError> {
         let text = std::fs::read_to_string(path)
             .map_err(|e| SceneError::Io { path: path.display().to_string(), message: e.to_string() })?;
         let desc = load::parse_scene_json(&text)?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
-        Scene::from_desc(desc, &dir, root)
+        Scene::from_desc_within(desc, &dir, root, budget)
     }
 
     /// Builds a scene from a description whose relative mesh paths resolve against `dir`.
     pub fn from_desc(desc: SceneDesc, dir: &Path, root: &Path) -> Result<Scene, SceneError> {
-        let (meshes, dropped_degenerate) = load::validate_and_build_meshes(&desc, dir, root)?;
+        Scene::from_desc_within(desc, dir, root, &SceneBudget::default())
+    }
+
+    /// [`Scene::from_desc`] refusing, before building anything, a scene over `budget`.
+    pub fn from_desc_within(
+        desc: SceneDesc,
+        dir: &Path,
+        root: &Path,
+        budget: &SceneBudget,
+    ) -> Result<Scene, SceneError> {
+        let (meshes, dropped_degenerate) = load::validate_and_build_meshes(&desc, dir, root, budget)?;
         let material_names: Vec<String> = desc.materials.keys().cloned().collect();
         let materials: Vec<Material> = desc.materials.values().cloned().collect();
         let objects = desc

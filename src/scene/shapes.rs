@@ -133,6 +133,44 @@ impl Mesh {
         m
     }
 
+    /// Triangles [`Mesh::sphere`] makes for `segments`, without making them.
+    pub fn sphere_triangles(segments: u32) -> u64 {
+        let segs = u64::from(segments.max(3));
+        let rings = (segs / 2).max(2);
+        2 * segs * (rings - 1)
+    }
+
+    /// Triangles [`Mesh::disc`] makes for `segments`.
+    pub fn disc_triangles(segments: u32) -> u64 {
+        u64::from(segments.max(3))
+    }
+
+    /// Triangles [`Mesh::cylinder`] makes for `segments`.
+    pub fn cylinder_triangles(segments: u32) -> u64 {
+        4 * u64::from(segments.max(3))
+    }
+
+    /// Triangles an OBJ file's faces make once triangulated (a face of n corners makes n − 2),
+    /// from its `f` lines alone: nothing is parsed or allocated per vertex.
+    pub fn count_obj_triangles(path: &Path) -> Result<u64, String> {
+        use std::io::BufRead;
+        let file = std::fs::File::open(path).map_err(|e| format!("cannot read OBJ {}: {e}", path.display()))?;
+        let mut triangles = 0u64;
+        let mut line = String::new();
+        let mut reader = std::io::BufReader::new(file);
+        loop {
+            line.clear();
+            match reader.read_line(&mut line) {
+                Ok(0) => return Ok(triangles),
+                Ok(_) => {}
+                Err(e) => return Err(format!("cannot read OBJ {}: {e}", path.display())),
+            }
+            if let Some(face) = line.strip_prefix("f ").or_else(|| line.strip_prefix("f\t")) {
+                triangles += (face.split_whitespace().count() as u64).saturating_sub(2);
+            }
+        }
+    }
+
     /// Loads every object of an OBJ file into one mesh (triangulated, positions only).
     pub fn load_obj(path: &Path) -> Result<Mesh, String> {
         let options =
@@ -166,6 +204,34 @@ impl Mesh {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn triangle_counts_are_known_before_the_meshes_are_made() {
+        for segments in [0, 3, 4, 5, 32, 101] {
+            assert_eq!(Mesh::sphere_triangles(segments), Mesh::sphere(segments).triangles.len() as u64, "{segments}");
+            assert_eq!(Mesh::disc_triangles(segments), Mesh::disc(segments).triangles.len() as u64, "{segments}");
+            assert_eq!(Mesh::cylinder_triangles(segments), Mesh::cylinder(segments).triangles.len() as u64);
+        }
+        let meshes = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/meshes");
+        let mut files = 0;
+        for entry in std::fs::read_dir(&meshes).expect("bundled meshes").flatten() {
+            let path = entry.path();
+            if path.extension().is_some_and(|e| e == "obj") {
+                let built = Mesh::load_obj(&path).expect("bundled OBJ").triangles.len() as u64;
+                assert_eq!(Mesh::count_obj_triangles(&path), Ok(built), "{}", path.display());
+                files += 1;
+            }
+        }
+        assert!(files > 0, "no bundled OBJ files to compare");
+        // A quad face and a pentagon fan into 2 and 3 triangles.
+        let dir = std::env::temp_dir().join(format!("relume-obj-count-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("temp dir");
+        let file = dir.join("faces.obj");
+        let text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0 2 0\nf 1 2 3 4\nf\t1 2 3 4 5\n";
+        std::fs::write(&file, text).expect("write");
+        assert_eq!(Mesh::count_obj_triangles(&file), Ok(5));
+        assert_eq!(Mesh::load_obj(&file).expect("parse").triangles.len(), 5);
+    }
 
     fn area_and_centroid_winding(m: &Mesh) -> (f32, f32) {
         // Sum of area and of (outward normal · centroid) for closed shapes centred at the origin.

@@ -5,7 +5,7 @@ use super::protocol::{CreateSession, SceneEntry, SessionLinks, SessionView};
 use super::worker::SessionHandle;
 use crate::embree::Device;
 use crate::engine::Session;
-use crate::scene::Scene;
+use crate::scene::{Scene, SceneBudget, SceneError};
 use crate::technique::{path::PathConfig, TechniqueConfig, TechniqueError};
 use axum::http::StatusCode;
 use std::collections::HashMap;
@@ -26,6 +26,9 @@ pub struct Limits {
     pub max_pixels: u64,
     pub max_sessions: usize,
     pub max_triangles: usize,
+    /// Objects and lights in one scene.
+    pub max_objects: usize,
+    pub max_lights: usize,
     pub max_edits_per_message: usize,
     pub max_spp_per_tick: u32,
     pub max_photon_paths: u32,
@@ -33,6 +36,25 @@ pub struct Limits {
     /// How long `GET frame?tick=N` waits for tick N.
     pub frame_wait: Duration,
     pub request_timeout: Duration,
+}
+
+impl Limits {
+    /// What a session's scene may hold, checked before any mesh is built.
+    pub fn scene_budget(&self) -> SceneBudget {
+        SceneBudget {
+            max_triangles: self.max_triangles as u64,
+            max_objects: self.max_objects,
+            max_lights: self.max_lights,
+        }
+    }
+}
+
+/// A scene that failed to load: 413 over the budget, 422 otherwise; `prefix` names where.
+fn scene_error(prefix: &str, e: SceneError) -> ApiError {
+    match e {
+        SceneError::TooLarge { .. } => ApiError::too_large(format!("{prefix}{e}")),
+        _ => ApiError::invalid(format!("{prefix}{e}")),
+    }
 }
 
 impl Default for Limits {
@@ -43,6 +65,8 @@ impl Default for Limits {
             max_pixels: 1 << 20,
             max_sessions: 16,
             max_triangles: 4_000_000,
+            max_objects: 10_000,
+            max_lights: 256,
             max_edits_per_message: 4096,
             max_spp_per_tick: 64,
             max_photon_paths: 4_000_000,
@@ -172,17 +196,16 @@ impl AppState {
                 if !path.is_file() {
                     return Err(ApiError::not_found(format!("scene: no bundled scene '{name}' (see GET /v1/scenes)")));
                 }
-                let scene = Scene::load(&path, root).map_err(|e| ApiError::invalid(format!("scene '{name}': {e}")))?;
+                let scene = Scene::load_within(&path, root, &limits.scene_budget())
+                    .map_err(|e| scene_error(&format!("scene '{name}': "), e))?;
                 (name.clone(), Some(root.clone()), scene)
             }
             serde_json::Value::Object(_) => {
                 let desc = crate::scene::load::parse_json(&req.scene.to_string())
                     .map_err(|e| ApiError::invalid(format!("scene.{e}")))?;
-                (
-                    "inline".to_string(),
-                    None,
-                    Scene::from_desc(desc, root, root).map_err(|e| ApiError::invalid(format!("scene.{e}")))?,
-                )
+                let scene = Scene::from_desc_within(desc, root, root, &limits.scene_budget())
+                    .map_err(|e| scene_error("scene.", e))?;
+                ("inline".to_string(), None, scene)
             }
             _ => return Err(ApiError::invalid("scene: expected a scene name (string) or an inline scene (object)")),
         };
@@ -197,14 +220,6 @@ impl AppState {
             )));
         }
         scene.set_resolution(w, h);
-        let triangles: usize = scene.objects.iter().map(|o| o.mesh.triangles.len()).sum::<usize>()
-            + scene.lights.iter().filter_map(|l| l.mesh.as_ref()).map(|m| m.triangles.len()).sum::<usize>();
-        if triangles > limits.max_triangles {
-            return Err(ApiError::too_large(format!(
-                "scene: {triangles} triangles exceed the limit of {}",
-                limits.max_triangles
-            )));
-        }
         let technique = req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default()));
         if technique.spp_per_tick() > limits.max_spp_per_tick {
             return Err(ApiError::too_large(format!(

@@ -19,9 +19,10 @@ use std::collections::BTreeMap;
 pub struct ReuseArgs {
     #[command(flatten)]
     pub run: AnimationArgs,
-    /// Photon paths.
-    #[arg(long, default_value_t = 1_000_000)]
-    pub paths: u32,
+    /// Photon paths; several, comma-separated (`1000000,4000000`), also measure how each mode's
+    /// tick grows with the number of paths.
+    #[arg(long, value_delimiter = ',', default_value = "1000000")]
+    pub paths: Vec<u32>,
 }
 
 #[derive(Debug, Serialize)]
@@ -66,6 +67,15 @@ pub struct ReuseReport {
     pub width: u32,
     pub height: u32,
     pub threads: usize,
+    /// The modes at the first `--paths`.
+    pub modes: Vec<ModeReport>,
+    /// The modes at each further `--paths`, in order.
+    pub larger: Vec<SizeReport>,
+}
+
+#[derive(Debug, Serialize)]
+pub struct SizeReport {
+    pub paths: u32,
     pub modes: Vec<ModeReport>,
 }
 
@@ -76,20 +86,42 @@ fn verify_ms(f: &FrameFigures) -> f64 {
 
 pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
     let run = args.run.start()?;
-    let modes = [ReuseMode::Off, ReuseMode::Naive, ReuseMode::Error];
-    let bar = progress_bar(modes.len() as u64 * args.run.frames as u64, "frames")?;
+    let Some((&first, rest)) = args.paths.split_first() else { anyhow::bail!("--paths: give at least one count") };
+    let bar = progress_bar(3 * args.paths.len() as u64 * args.run.frames as u64, "frames")?;
+    let modes = measure_size(args, &run, first, &bar)?;
+    let larger = rest
+        .iter()
+        .map(|&paths| Ok(SizeReport { paths, modes: measure_size(args, &run, paths, &bar)? }))
+        .collect::<Result<Vec<_>>>()?;
+    bar.finish_and_clear();
+    Ok(ReuseReport {
+        scene: args.run.target.scene.display().to_string(),
+        animation: args.run.anim.display().to_string(),
+        paths: first,
+        width: run.scene.camera.width,
+        height: run.scene.camera.height,
+        threads: run.threads,
+        modes,
+        larger,
+    })
+}
+
+/// Every mode over the animation with `paths` resident paths.
+fn measure_size(
+    args: &ReuseArgs,
+    run: &super::AnimationRun,
+    paths: u32,
+    bar: &indicatif::ProgressBar,
+) -> Result<Vec<ModeReport>> {
     let mut reports = Vec::new();
-    for mode in modes {
+    for mode in [ReuseMode::Off, ReuseMode::Naive, ReuseMode::Error] {
         let name = serde_json::to_value(mode)?.as_str().unwrap_or("?").to_string();
-        bar.set_message(name.clone());
-        let config = TechniqueConfig::PhotonReuse(PhotonReuseConfig {
-            paths: args.paths,
-            reuse: mode,
-            ..PhotonReuseConfig::default()
-        });
+        bar.set_message(format!("{name}, {paths} paths"));
+        let config =
+            TechniqueConfig::PhotonReuse(PhotonReuseConfig { paths, reuse: mode, ..PhotonReuseConfig::default() });
         let mut figures = Vec::new();
         let mut memory = 0;
-        args.run.play(&run, &config, |_, frame| {
+        args.run.play(run, &config, |_, frame| {
             let TechniqueStats::PhotonReuse(s) = &frame.stats.detail else {
                 anyhow::bail!("photon_reuse stats expected");
             };
@@ -139,16 +171,7 @@ pub fn measure(args: &ReuseArgs) -> Result<ReuseReport> {
         };
         reports.push(ModeReport { mode: name, initial, frames: figures, summary });
     }
-    bar.finish_and_clear();
-    Ok(ReuseReport {
-        scene: args.run.target.scene.display().to_string(),
-        animation: args.run.anim.display().to_string(),
-        paths: args.paths,
-        width: run.scene.camera.width,
-        height: run.scene.camera.height,
-        threads: run.threads,
-        modes: reports,
-    })
+    Ok(reports)
 }
 
 pub fn print_table(r: &ReuseReport) {
@@ -187,6 +210,18 @@ pub fn print_table(r: &ReuseReport) {
             o.trace_plus_verify_ms_median / n.trace_plus_verify_ms_median.max(1e-9),
             100.0 * n.verify_ms_median / o.tick_ms_median.max(1e-9)
         );
+    }
+    for size in &r.larger {
+        let growth: Vec<String> = size
+            .modes
+            .iter()
+            .filter_map(|m| {
+                let base = r.modes.iter().find(|b| b.mode == m.mode)?;
+                let g = m.summary.tick_ms_median / base.summary.tick_ms_median.max(1e-9);
+                Some(format!("{} {:.2}x ({:.1} ms)", m.mode, g, m.summary.tick_ms_median))
+            })
+            .collect();
+        println!("  {} -> {} paths, median tick grows: {}", r.paths, size.paths, growth.join(", "));
     }
 }
 
