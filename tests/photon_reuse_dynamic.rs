@@ -247,3 +247,67 @@ fn every_mode_matches_the_path_reference_after_a_block_moves() {
     });
     assert_rejected_by_reference("never updated", &stale, &reference, AFTER_MOVE_TOLERANCE);
 }
+
+/// The Cornell box at 16² with its light's radiance set to `radiance`.
+fn cornell_lit(radiance: [f32; 3]) -> Scene {
+    let mut scene = load("cornell-box.json");
+    scene.set_resolution(16, 16);
+    let desc = scene.desc().lights[0].clone();
+    scene.set_light(0, desc.transform, radiance_emitter(radiance));
+    scene
+}
+
+fn radiance_emitter(radiance: [f32; 3]) -> relume::scene::EmitterDesc {
+    relume::scene::EmitterDesc::Rect { radiance: relume::core::Rgb::new(radiance[0], radiance[1], radiance[2]) }
+}
+
+fn radiance_edit(radiance: [f32; 3]) -> Edit {
+    Edit::Light { name: "ceiling-light".into(), transform: None, emitter: Some(radiance_emitter(radiance)) }
+}
+
+/// Largest relative difference, over the channels, between two photon maps' total fluxes.
+fn flux_gap(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (0..3).map(|c| (a[c] - b[c]).abs() / b[c].abs().max(1e-300)).fold(0.0, f64::max)
+}
+
+#[test]
+fn a_colour_edit_rescales_every_flux_exactly_with_no_rays() {
+    // Twin runs with the same seed: one starts with the old radiance and is edited to the new
+    // one, the other starts with the new one. Every path draws the same random numbers, so the
+    // edited map must carry the twin's flux up to f32 rounding, without tracing a ray.
+    // Negative control: the map before the edit (what keeping the stored powers would give).
+    let (old, new) = ([17.0, 12.0, 4.0], [8.5, 18.0, 10.0]);
+    let device = Device::new(2).unwrap();
+    for reuse in [ReuseMode::Naive, ReuseMode::Error] {
+        let c = PhotonReuseConfig { paths: 20_000, reuse, refine: 0.0, ..PhotonReuseConfig::default() };
+        let mut edited = session(cornell_lit(old), c.clone(), 4, &device);
+        let before = photon_stats(&edited.tick().unwrap());
+        edited.queue_edits(vec![radiance_edit(new)]).unwrap();
+        let after = photon_stats(&edited.tick().unwrap());
+        let twin = photon_stats(&session(cornell_lit(new), c, 4, &device).tick().unwrap());
+        assert_eq!(after.photon_rays(), 0, "{reuse:?}: the rescale traced rays");
+        assert_eq!(after.rescaled, 20_000);
+        let gap = flux_gap(after.grid_power, twin.grid_power);
+        assert!(gap <= 1e-6, "{reuse:?}: rescaled map {:?} vs twin {:?} ({gap:e})", after.grid_power, twin.grid_power);
+        let stale = flux_gap(before.grid_power, twin.grid_power);
+        assert!(stale > 1e-6, "{reuse:?}: the stale map passed ({stale:e})");
+    }
+}
+
+#[test]
+fn a_light_switched_on_gets_its_share_of_paths() {
+    // A light dark at the first tick owned no paths, so switching it on lit nothing. Now its
+    // switch-on assigns the paths afresh: the map equals that of a twin lit from the start.
+    // Negative control: the dark map (no paths for the light) fails the same comparison.
+    let lit = [17.0, 12.0, 4.0];
+    let device = Device::new(2).unwrap();
+    let c = PhotonReuseConfig { paths: 20_000, refine: 0.0, ..PhotonReuseConfig::default() };
+    let mut s = session(cornell_lit([0.0; 3]), c.clone(), 6, &device);
+    let dark = photon_stats(&s.tick().unwrap());
+    s.queue_edits(vec![radiance_edit(lit)]).unwrap();
+    let on = photon_stats(&s.tick().unwrap());
+    let twin = photon_stats(&session(cornell_lit(lit), c, 6, &device).tick().unwrap());
+    assert!(on.reassigned && on.fully_retraced == 20_000, "{on:?}");
+    assert!(flux_gap(on.grid_power, twin.grid_power) <= 1e-9, "{:?} vs {:?}", on.grid_power, twin.grid_power);
+    assert!(flux_gap(dark.grid_power, twin.grid_power) > 0.5, "the dark map passed: {:?}", dark.grid_power);
+}

@@ -14,7 +14,7 @@
 //! Animation players re-send every track every frame, so a held pose costs nothing.
 use super::load::{validate_emitter, validate_material, validate_trs, SceneError};
 use super::model::{CameraDesc, EmitterDesc, Material, Trs};
-use super::{Scene, SurfaceId};
+use super::{light, Scene, SurfaceId};
 use glam::{Affine3A, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -106,6 +106,9 @@ pub struct LightChange {
     pub moved: bool,
     /// Its emitter's parameters changed (power, cone, shape).
     pub emission_changed: bool,
+    /// The emitter changed only in intensity or radiance: every flux it sent out is scaled by
+    /// this factor per channel (see [`light::emission_rescale`]).
+    pub rescale: Option<crate::core::Rgb>,
 }
 
 impl SceneDelta {
@@ -318,6 +321,7 @@ fn apply_light(
     let emitter = emitter.unwrap_or_else(|| old.emitter.clone());
     let moved = trs.world_from_object() != old_xf;
     let emission_changed = emitter != old.emitter;
+    let rescale = if emission_changed { light::emission_rescale(&old.emitter, &emitter) } else { None };
     if !moved && !emission_changed {
         return false;
     }
@@ -332,7 +336,7 @@ fn apply_light(
             new_bounds: light_bounds(scene, idx),
         });
     }
-    delta.lights.push(LightChange { light: idx, old_world_from_object: old_xf, moved, emission_changed });
+    delta.lights.push(LightChange { light: idx, old_world_from_object: old_xf, moved, emission_changed, rescale });
     true
 }
 

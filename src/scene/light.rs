@@ -36,6 +36,28 @@ pub struct IncidentSample {
     pub normal: Vec3,
 }
 
+/// When `new` differs from `old` only in its intensity or radiance, and every channel of the
+/// old one is positive: the per-channel factor new/old. Every flux the old emitter sent out is
+/// linear in that parameter, so this factor turns it into the new emitter's exactly (up to
+/// rounding), with no new samples.
+pub fn emission_rescale(old: &EmitterDesc, new: &EmitterDesc) -> Option<Rgb> {
+    let (a, b) = match (old, new) {
+        (EmitterDesc::Point { intensity: a }, EmitterDesc::Point { intensity: b }) => (a, b),
+        (
+            EmitterDesc::Spot { intensity: a, cone_deg: c, falloff_start_deg: f },
+            EmitterDesc::Spot { intensity: b, cone_deg: c2, falloff_start_deg: f2 },
+        ) if c == c2 && f == f2 => (a, b),
+        (EmitterDesc::Rect { radiance: a }, EmitterDesc::Rect { radiance: b }) => (a, b),
+        (EmitterDesc::Disc { radiance: a, segments: s }, EmitterDesc::Disc { radiance: b, segments: s2 })
+            if s == s2 =>
+        {
+            (a, b)
+        }
+        _ => return None,
+    };
+    (a.min_component() > 0.0).then(|| Rgb::new(b.r / a.r, b.g / a.g, b.b / a.b))
+}
+
 /// The object-space mesh of a light with a shape (`None` for point and spot lights).
 pub fn emitter_mesh(emitter: &EmitterDesc) -> Option<Mesh> {
     match emitter {

@@ -24,6 +24,9 @@
 //!
 //! A spot light's falloff makes a path's flux depend on its direction: when the direction
 //! changes, the path's photons are rescaled by the exact ratio of the new to the old flux.
+//!
+//! An edit of a light's intensity or colour alone traces nothing: every flux its paths carry
+//! is linear in it, so [`rescale`] multiplies them by the exact factor new/old per channel.
 use super::distribution::{DistributionMap, EmissionFrame};
 use super::store::PathStore;
 use super::trace::{photon_at, surface_normal, Retrace};
@@ -203,4 +206,22 @@ pub fn balance(lm: &mut MappedLight, store: &PathStore, valid: &[bool], seed: u6
         }
     }
     out
+}
+
+/// Scales every flux light `l`'s paths carry, their segment-0 flux and every photon's, by
+/// `factor` per channel. No rays. Returns the paths it changed.
+pub fn rescale(store: &mut PathStore, l: usize, factor: Rgb) -> Vec<usize> {
+    let paths: Vec<usize> = (0..store.paths).into_par_iter().filter(|&i| store.light[i] as usize == l).collect();
+    let photons: Vec<u32> = paths.iter().map(|&i| store.word[i].photons()).collect();
+    for &i in &paths {
+        store.emit_power[i] *= factor;
+    }
+    store.rows.par_iter_mut().enumerate().for_each(|(k, row)| {
+        for (&i, &n) in paths.iter().zip(&photons) {
+            if (k as u32) < n {
+                row.power[i] *= factor;
+            }
+        }
+    });
+    paths
 }

@@ -11,10 +11,14 @@
 //! 2. **Update path origins + DM_C** for lights that moved (`lights.rs`, §3.1): a light's
 //!    distribution map (`distribution.rs`) is made the first time it moves; kept paths get the
 //!    new origin, their new primary segment is checked against the full scene with an occlusion
-//!    ray, and invalid ones free their slot. A light whose emission changed re-emits its paths.
-//! 3. **Dynamic occlusions** (§3.2–3.3): every other path is tested segment by segment from the
-//!    light against the old and new world bounds of every moved surface (a small BVH over the
-//!    boxes, `verify.rs`) and against edited materials. `naive`: the first segment that may be
+//!    ray, and invalid ones free their slot. A light whose intensity or colour alone changed
+//!    scales its paths' fluxes by the exact factor (`lights::rescale`, no rays); any other
+//!    emission change re-emits its paths; a light that owned no paths (dark when they were
+//!    assigned) and now emits has every path assigned and emitted afresh.
+//! 3. **Dynamic occlusions** (§3.2–3.3): a bounce-row screen (`verify.rs`) passes on only the
+//!    paths with a segment near a moved box or ending on a moved or edited object; those are
+//!    tested segment by segment from the light against the old and new world bounds of every
+//!    moved surface (a small BVH over the boxes) and against edited materials. `naive`: the first segment that may be
 //!    crossed, or that ends on a moved object, is re-intersected and everything after it is
 //!    traced afresh. `error` (`error.rs`, Algorithm 1): crossed segments are re-traced and the
 //!    path is kept while the energy reflected at each new vertex stays within T of the stored.
@@ -189,6 +193,16 @@ impl PhotonReuse {
         store
     }
 
+    /// A light that owns no paths (it was dark when they were assigned) emits now: only a
+    /// new assignment gives it its share.
+    fn dark_light_lit(&self, scene: &Scene, delta: &SceneDelta) -> bool {
+        delta.lights.iter().any(|c| {
+            c.emission_changed
+                && self.paths_per_light.get(c.light).is_some_and(|&n| n == 0)
+                && scene.lights[c.light].geometry.power().max_component() > 0.0
+        })
+    }
+
     /// Traces the given retraces in parallel, in chunks that bound temporary memory; fills and
     /// the rest are timed and counted apart.
     fn retrace(
@@ -250,11 +264,24 @@ impl PhotonReuse {
         let lights = scene.lights.len();
         let mut reemit = vec![false; lights];
         let mut moved_from: Vec<Option<Affine3A>> = vec![None; lights];
+        let mut rescaled = false;
         for change in &delta.lights {
-            if change.emission_changed {
-                reemit[change.light] = true;
-                self.maps[change.light] = None;
-            } else if change.moved {
+            let reuse = self.config.reuse != ReuseMode::Off;
+            match (change.emission_changed, change.rescale) {
+                (true, Some(factor)) if reuse => {
+                    let paths = lights::rescale(store, change.light, factor);
+                    self.pending.rescaled += paths.len() as u64;
+                    touched.extend(paths);
+                    rescaled = true;
+                }
+                (true, _) => {
+                    reemit[change.light] = true;
+                    self.maps[change.light] = None;
+                    continue;
+                }
+                (false, _) => {}
+            }
+            if change.moved {
                 moved_from[change.light] = Some(change.old_world_from_object);
             }
         }
@@ -275,7 +302,7 @@ impl PhotonReuse {
         }
         let mut plan: Vec<Option<Retrace>> = vec![None; store.paths];
         let mut standing = vec![Standing::Unchecked; store.paths];
-        let mut changed = false;
+        let mut changed = rescaled;
 
         // Lights: re-emit those whose emission changed; update origins of those that moved.
         let t = Instant::now();
@@ -446,6 +473,11 @@ impl Technique for PhotonReuse {
 
     fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
         self.pending = PhotonStats::default();
+        let lit = self.store.is_some() && self.dark_light_lit(ctx.scene, delta);
+        if lit {
+            self.store = None;
+            self.pending.reassigned = true;
+        }
         match self.store.take() {
             None => {
                 let store = self.build(ctx);

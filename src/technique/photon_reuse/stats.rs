@@ -17,6 +17,11 @@ pub struct PhotonStats {
     pub filled: u64,
     /// Emitted afresh by this still tick's progressive refinement.
     pub refined: u64,
+    /// Paths whose fluxes an intensity or colour edit scaled, with no rays.
+    pub rescaled: u64,
+    /// Every path was assigned to the lights and emitted afresh this tick: a light that owned
+    /// no paths (it was dark at the first tick) was switched on.
+    pub reassigned: bool,
     // Rays by kind.
     /// Occlusion rays checking the new primary segments of moved lights.
     pub origin_rays: u64,
