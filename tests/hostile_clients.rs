@@ -208,3 +208,52 @@ async fn meshes_objects_and_lights_are_counted_before_anything_is_built() {
     assert_eq!(status, 201, "{body}");
     s.shutdown().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_technique_is_bounded_before_it_allocates() {
+    // Hazard: `particle_area` overrode the particle cap (1e-9 m² asks for ~10¹² particles on
+    // the Cornell box), and nothing weighed VPLs × cache records or paths × bounces against
+    // memory. Each is now estimated at creation and refused with 413 naming its field.
+    let limits = Limits { session_memory: 256 << 20, server_memory: 300 << 20, ..Limits::default() };
+    let s = TestServer::start(None, limits).await;
+    let cases = [
+        (json!({"id": "particle_gi", "particle_area": 1e-9}), "technique.particle_area"),
+        (json!({"id": "instant_cache", "vpls": 65536}), "technique.vpls"),
+        (json!({"id": "photon_reuse", "paths": 4_000_000}), "technique.paths"),
+        (json!({"id": "photon_reuse", "paths": 1000, "radius": 1e6}), "technique.radius"),
+    ];
+    for (technique, field) in cases {
+        let (status, body) = post(&s, "/v1/sessions", json!({"scene": "cornell-box", "technique": technique})).await;
+        assert_eq!(status, 413, "{technique}: {body}");
+        assert!(body["detail"].as_str().unwrap_or_default().contains(field), "{technique}: {body}");
+    }
+    assert_eq!(s.state.session_count(), 0);
+    // The server's budget: two sessions that fit one at a time do not fit together, and a
+    // deleted session gives its share back.
+    let big = json!({"scene": "cornell-box", "width": 16, "height": 16, "technique": {"id": "photon_reuse", "paths": 250_000}});
+    let first = s.session(big.clone()).await;
+    let (status, body) = post(&s, "/v1/sessions", big.clone()).await;
+    assert_eq!(status, 429, "{body}");
+    assert!(body["detail"].as_str().unwrap_or_default().contains("--server-memory"), "{body}");
+    let r = s.http.delete(s.url(&format!("/v1/sessions/{first}"))).send().await.expect("delete");
+    assert_eq!(r.status().as_u16(), 204);
+    let (status, body) = post(&s, "/v1/sessions", big).await;
+    assert_eq!(status, 201, "{body}");
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_creations_never_exceed_max_sessions() {
+    // Hazard: the session count was checked before loading and the session inserted after,
+    // so creations racing through the load all passed the check. Places are now reserved
+    // atomically before loading.
+    let limits = Limits { max_sessions: 2, ..Limits::default() };
+    let s = TestServer::start(None, limits).await;
+    let tries = (0..8).map(|_| post(&s, "/v1/sessions", small("cornell-box")));
+    let answers = futures_util::future::join_all(tries).await;
+    let created = answers.iter().filter(|(status, _)| *status == 201).count();
+    assert_eq!(created, 2, "{answers:?}");
+    assert!(answers.iter().all(|(status, _)| *status == 201 || *status == 429), "{answers:?}");
+    assert_eq!(s.state.session_count(), 2);
+    s.shutdown().await.unwrap();
+}

@@ -43,6 +43,9 @@ pub struct Film {
 }
 
 impl Film {
+    /// Bytes a film holds per pixel.
+    pub const BYTES_PER_PIXEL: u64 = std::mem::size_of::<PixelAccum>() as u64;
+
     pub fn new(width: u32, height: u32) -> Film {
         Film {
             width,

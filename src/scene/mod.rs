@@ -265,6 +265,13 @@ impl Scene {
         self.update_light_selection();
     }
 
+    /// The world bounds of every object (`None` for a scene without objects).
+    pub fn bounds(&self) -> Option<(Vec3, Vec3)> {
+        let mut points = self.objects.iter().flat_map(|o| o.world_positions.iter().copied());
+        let first = points.next()?;
+        Some(points.fold((first, first), |(lo, hi), p| (lo.min(p), hi.max(p))))
+    }
+
     /// Replaces the camera (validated by the caller), keeping the render resolution.
     pub fn set_camera(&mut self, mut camera: CameraDesc) {
         camera.resolution = self.desc.camera.resolution;

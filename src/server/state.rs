@@ -32,6 +32,10 @@ pub struct Limits {
     pub max_edits_per_message: usize,
     pub max_spp_per_tick: u32,
     pub max_photon_paths: u32,
+    /// Estimated resident bytes one session may hold (413 beyond), and all sessions together
+    /// (429 beyond).
+    pub session_memory: u64,
+    pub server_memory: u64,
     pub max_tick_hz: f32,
     /// How long `GET frame?tick=N` waits for tick N.
     pub frame_wait: Duration,
@@ -70,6 +74,8 @@ impl Default for Limits {
             max_edits_per_message: 4096,
             max_spp_per_tick: 64,
             max_photon_paths: 4_000_000,
+            session_memory: 2 << 30,
+            server_memory: 16 << 30,
             max_tick_hz: 120.0,
             frame_wait: Duration::from_secs(10),
             request_timeout: Duration::from_secs(60),
@@ -98,7 +104,57 @@ pub struct SessionEntry {
     pub height: u32,
     pub seed: u64,
     pub tick_hz: Option<f32>,
+    /// Its estimated resident memory.
+    pub memory_bytes: u64,
     pub handle: SessionHandle,
+    /// Its place in the session count and the memory budget, released when the entry drops.
+    _reservation: Reservation,
+}
+
+/// What the live sessions and those being created hold: a count and estimated bytes.
+#[derive(Debug, Default)]
+struct Reserved {
+    sessions: usize,
+    bytes: u64,
+}
+
+/// A session's share of [`Reserved`], taken before its scene is loaded (so concurrent
+/// creations cannot exceed `max_sessions`) and returned on drop, whether the creation failed
+/// or the session was deleted.
+pub struct Reservation {
+    table: Arc<std::sync::Mutex<Reserved>>,
+    bytes: u64,
+}
+
+impl Reservation {
+    /// Adds `bytes` to this reservation unless the server's total would exceed `limit`.
+    fn add_bytes(&mut self, bytes: u64, limit: u64) -> Result<(), ApiError> {
+        let mut r = self.table.lock().map_err(|_| ApiError::internal("reservation lock poisoned"))?;
+        if r.bytes.saturating_add(bytes) > limit {
+            return Err(ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "server_memory_full",
+                format!(
+                    "the session would hold about {} MiB; the server's sessions already hold {} of its {} MiB (--server-memory)",
+                    bytes >> 20,
+                    r.bytes >> 20,
+                    limit >> 20
+                ),
+            ));
+        }
+        r.bytes += bytes;
+        self.bytes += bytes;
+        Ok(())
+    }
+}
+
+impl Drop for Reservation {
+    fn drop(&mut self) {
+        if let Ok(mut r) = self.table.lock() {
+            r.sessions -= 1;
+            r.bytes -= self.bytes;
+        }
+    }
 }
 
 pub struct AppState {
@@ -107,6 +163,7 @@ pub struct AppState {
     pub device: Device,
     pub pool: Arc<rayon::ThreadPool>,
     pub sessions: RwLock<HashMap<String, Arc<SessionEntry>>>,
+    reserved: Arc<std::sync::Mutex<Reserved>>,
     next_id: AtomicU64,
     /// Flips to true when the server begins shutting down; WebSocket loops watch it.
     pub shutting_down: tokio::sync::watch::Sender<bool>,
@@ -128,6 +185,7 @@ impl AppState {
             device,
             pool,
             sessions: RwLock::new(HashMap::new()),
+            reserved: Arc::default(),
             next_id: AtomicU64::new(1),
             shutting_down,
         })
@@ -176,13 +234,7 @@ impl AppState {
     /// `spawn_blocking`.
     pub fn create_session(&self, req: CreateSession) -> Result<SessionView, ApiError> {
         let limits = &self.config.limits;
-        if self.session_count() >= limits.max_sessions {
-            return Err(ApiError::new(
-                StatusCode::TOO_MANY_REQUESTS,
-                "too_many_sessions",
-                format!("the server holds its maximum of {} sessions", limits.max_sessions),
-            ));
-        }
+        let mut reservation = self.reserve_session()?;
         // The scene: a bundled name or an inline document confined to the scenes root.
         let root = &self.config.scenes_root;
         let (scene_name, scene_dir, mut scene) = match &req.scene {
@@ -244,9 +296,14 @@ impl AppState {
             }
         }
 
+        let memory_bytes = self.check_memory(&technique, &scene, u64::from(w) * u64::from(h))?;
+        reservation.add_bytes(memory_bytes, limits.server_memory)?;
         let session = Session::new(scene, &technique, req.seed, &self.device).map_err(|e| match e {
             crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
                 ApiError::invalid(format!("technique: {t}"))
+            }
+            crate::engine::EngineError::Technique(t @ TechniqueError::TooLarge { .. }) => {
+                ApiError::too_large(format!("technique.{t}"))
             }
             crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("scene: {s}")),
             other => ApiError::internal(other.to_string()),
@@ -268,7 +325,9 @@ impl AppState {
             height: h,
             seed: req.seed,
             tick_hz: req.tick_hz,
+            memory_bytes,
             handle,
+            _reservation: reservation,
         });
         self.sessions
             .write()
@@ -276,6 +335,41 @@ impl AppState {
             .insert(id.clone(), entry.clone());
         self.metrics.sessions_created.fetch_add(1, Ordering::Relaxed);
         Ok(view(&entry))
+    }
+
+    /// Takes a place among `max_sessions` atomically (429 when there is none).
+    fn reserve_session(&self) -> Result<Reservation, ApiError> {
+        let max = self.config.limits.max_sessions;
+        let mut r = self.reserved.lock().map_err(|_| ApiError::internal("reservation lock poisoned"))?;
+        if r.sessions >= max {
+            return Err(ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "too_many_sessions",
+                format!("the server holds its maximum of {max} sessions"),
+            ));
+        }
+        r.sessions += 1;
+        Ok(Reservation { table: self.reserved.clone(), bytes: 0 })
+    }
+
+    /// The session's estimated resident bytes (technique and film), refused with 413 naming
+    /// the technique's sizing field when over `session_memory`.
+    fn check_memory(&self, technique: &TechniqueConfig, scene: &Scene, pixels: u64) -> Result<u64, ApiError> {
+        let limit = self.config.limits.session_memory;
+        let estimate = technique.resident_estimate(scene, pixels).map_err(|e| match e {
+            TechniqueError::TooLarge { .. } => ApiError::too_large(format!("technique.{e}")),
+            other => ApiError::invalid(format!("technique: {other}")),
+        })?;
+        let bytes = estimate.bytes.saturating_add(pixels * crate::film::Film::BYTES_PER_PIXEL);
+        if bytes > limit {
+            return Err(ApiError::too_large(format!(
+                "technique.{}: the session would hold about {} MiB, above the {} MiB a session may hold (--session-memory)",
+                estimate.field,
+                bytes >> 20,
+                limit >> 20
+            )));
+        }
+        Ok(bytes)
     }
 
     /// Removes a session and stops its worker (blocking: call from `spawn_blocking`).

@@ -7,6 +7,7 @@
 //! through `Box<dyn Technique>`; per-ray variety inside a technique is a closed `enum`.
 pub mod bdpt;
 pub mod box_tree;
+pub mod budget;
 pub mod camera_chain;
 pub mod instant_cache;
 pub mod nee;
@@ -14,6 +15,8 @@ pub mod particle_gi;
 pub mod path;
 pub mod photon_reuse;
 mod spec;
+
+pub use budget::MemoryEstimate;
 
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -34,6 +37,9 @@ pub struct RenderContext<'a> {
 pub enum TechniqueError {
     #[error("invalid technique configuration: {field}: {message}")]
     InvalidConfig { field: String, message: String },
+    /// Valid, but more than the session may allocate (checked before allocating).
+    #[error("{field}: {message}")]
+    TooLarge { field: String, message: String },
     #[error("embree: {0}")]
     Embree(#[from] crate::embree::EmbreeError),
 }
@@ -156,6 +162,21 @@ impl TechniqueConfig {
     }
 
     /// Resident photon paths the technique keeps (0 for techniques without any).
+    /// Resident memory the technique will hold on `scene` at `pixels` pixels, before anything
+    /// is allocated (see `budget.rs`). The film, which every technique has, is not included.
+    pub fn resident_estimate(
+        &self,
+        scene: &crate::scene::Scene,
+        pixels: u64,
+    ) -> Result<MemoryEstimate, TechniqueError> {
+        match self {
+            TechniqueConfig::Path(_) | TechniqueConfig::Bdpt(_) => Ok(MemoryEstimate { bytes: 0, field: "id" }),
+            TechniqueConfig::PhotonReuse(c) => c.resident_estimate(scene, pixels),
+            TechniqueConfig::InstantCache(c) => c.resident_estimate(pixels),
+            TechniqueConfig::ParticleGi(c) => c.resident_estimate(scene),
+        }
+    }
+
     pub fn photon_paths(&self) -> u32 {
         match self {
             TechniqueConfig::Path(_)

@@ -19,6 +19,14 @@ pub struct ServeArgs {
     pub token: Option<String>,
     #[arg(long, default_value_t = 16)]
     pub max_sessions: usize,
+    /// Memory one session may hold, in MiB: a session whose estimate (technique, film) is
+    /// larger is refused with 413 before anything is allocated.
+    #[arg(long, default_value_t = 2048)]
+    pub session_memory: u64,
+    /// Memory all sessions together may hold, in MiB (default: three quarters of this
+    /// machine's RAM); a session that would exceed it is refused with 429.
+    #[arg(long)]
+    pub server_memory: Option<u64>,
     /// Rendering threads shared by all sessions (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -44,14 +52,32 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
     if args.max_sessions == 0 {
         return Err(UsageError("--max-sessions must be at least 1".into()).into());
     }
+    if args.session_memory == 0 || args.server_memory == Some(0) {
+        return Err(UsageError("--session-memory and --server-memory must be at least 1 MiB".into()).into());
+    }
     let threads = super::threads_or_all_cores(args.threads);
+    let server_memory = args.server_memory.map_or_else(three_quarters_of_ram, |mib| mib << 20);
     Ok(ServerConfig {
         scenes_root: args.scenes.canonicalize().with_context(|| format!("resolving {}", args.scenes.display()))?,
         token: args.token.clone().filter(|t| !t.is_empty()),
         threads,
         isa: args.isa,
-        limits: Limits { max_sessions: args.max_sessions, ..Limits::default() },
+        limits: Limits {
+            max_sessions: args.max_sessions,
+            session_memory: args.session_memory << 20,
+            server_memory,
+            ..Limits::default()
+        },
     })
+}
+
+/// Three quarters of `MemTotal` in /proc/meminfo, or the default budget where it is unknown.
+fn three_quarters_of_ram() -> u64 {
+    let total_kib = std::fs::read_to_string("/proc/meminfo").ok().and_then(|m| {
+        let line = m.lines().find(|l| l.starts_with("MemTotal:"))?;
+        line.split_whitespace().nth(1)?.parse::<u64>().ok()
+    });
+    total_kib.map_or(Limits::default().server_memory, |kib| kib * 1024 / 4 * 3)
 }
 
 pub fn run(args: ServeArgs) -> Result<()> {

@@ -1,6 +1,9 @@
 //! `instant_cache`'s configuration (validated as the service receives it) and its per-tick
 //! figures. Distances are fractions of the scene's bounding diagonal; times in milliseconds;
 //! memory in bytes.
+use super::cache::Record;
+use super::vpl::Vpl;
+use crate::technique::budget::{product_sum, size, MemoryEstimate};
 use crate::technique::TechniqueError;
 use serde::{Deserialize, Serialize};
 
@@ -67,6 +70,15 @@ impl Default for InstantCacheConfig {
 pub const MAX_VPLS: u32 = 65_536;
 
 impl InstantCacheConfig {
+    /// Resident memory at `pixels` pixels (`budget.rs`): the VPLs and the cache records, at
+    /// most one per camera sample of a tick, each holding 4 bytes per VPL; `audit` holds a
+    /// second cache while it recomputes.
+    pub fn resident_estimate(&self, pixels: u64) -> Result<MemoryEstimate, TechniqueError> {
+        let vpls = u64::from(self.vpls);
+        let records = pixels.saturating_mul(u64::from(self.spp)) * if self.audit { 2 } else { 1 };
+        product_sum("vpls", &[(vpls, size::<Vpl>()), (records, size::<Record>() + 4 * vpls)])
+    }
+
     pub fn validate(&self) -> Result<(), TechniqueError> {
         let bad = |field: &str, message: &str| {
             Err(TechniqueError::InvalidConfig { field: field.into(), message: message.into() })

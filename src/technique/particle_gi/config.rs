@@ -1,6 +1,9 @@
 //! `particle_gi`'s configuration (validated as the service receives it) and its per-tick
 //! figures, laid out like Chang et al.'s Tables 1 and 2. Lengths are fractions of the particle
 //! spacing √ΔA unless stated; times in milliseconds; memory in bytes.
+use super::particles;
+use crate::scene::Scene;
+use crate::technique::budget::{product_sum, MemoryEstimate};
 use crate::technique::TechniqueError;
 use serde::{Deserialize, Serialize};
 
@@ -62,6 +65,31 @@ impl Default for ParticleGiConfig {
 pub const MAX_PARTICLES: u32 = 4_000_000;
 
 impl ParticleGiConfig {
+    /// Resident memory on `scene` (`budget.rs`): the particles `particles` or `particle_area`
+    /// gives there, their area estimation's temporary samples, and both link sets (an end and
+    /// a distance per link, plus what tracing them holds while building). Refuses more than
+    /// [`MAX_PARTICLES`] particles, which `particle_area` alone cannot bound.
+    pub fn resident_estimate(&self, scene: &Scene) -> Result<MemoryEstimate, TechniqueError> {
+        let field = if self.particle_area.is_some() { "particle_area" } else { "particles" };
+        let planned = particles::planned_particles(scene, self.particles, self.particle_area);
+        if planned > f64::from(MAX_PARTICLES) {
+            return Err(TechniqueError::TooLarge {
+                field: field.into(),
+                message: format!("gives {planned:.0} particles on this scene, above the limit of {MAX_PARTICLES}"),
+            });
+        }
+        let particles = planned as u64;
+        let links_each = u64::from(self.scatter_links.pow(2) + self.gather_links.pow(2));
+        product_sum(
+            field,
+            &[
+                (particles, particles::BYTES_PER_PARTICLE),
+                (particles / 2, particles::SAMPLING_BYTES_PER_POINT),
+                (particles * links_each, 4 + 2 + 8),
+            ],
+        )
+    }
+
     pub fn validate(&self) -> Result<(), TechniqueError> {
         let bad = |field: &str, message: &str| {
             Err(TechniqueError::InvalidConfig { field: field.into(), message: message.into() })

@@ -36,6 +36,35 @@ pub struct AreaParticles {
     pub area: f32,
 }
 
+/// The diffuse objects, which carry particles.
+fn diffuse_objects(scene: &Scene) -> Vec<usize> {
+    (0..scene.objects.len()).filter(|&i| !scene.materials[scene.objects[i].material as usize].is_specular()).collect()
+}
+
+/// Points (each two particles, one per side) for `count` particles or one per `area` m², over
+/// `total` m² of diffuse surface.
+fn planned_points(count: u32, area: Option<f32>, total: f64) -> f64 {
+    match area {
+        Some(a) => (total / a as f64).round(),
+        None => (count / 2) as f64,
+    }
+    .max(1.0)
+}
+
+/// Particles [`AreaParticles::sample`] will make on `scene`, without making them.
+pub fn planned_particles(scene: &Scene, count: u32, area: Option<f32>) -> f64 {
+    let total: f64 = diffuse_objects(scene).iter().map(|&i| scaled_area(scene, i)).sum();
+    if total <= 0.0 {
+        return 0.0;
+    }
+    2.0 * planned_points(count, area, total)
+}
+
+/// Bytes per particle as `memory_bytes` counts them, and the temporary bytes per point while
+/// its area is estimated (`AREA_SAMPLES` stratified samples of a triangle and a barycentric).
+pub const BYTES_PER_PARTICLE: u64 = 4 + 4 + 8 + 12 + 12 + 4;
+pub const SAMPLING_BYTES_PER_POINT: u64 = AREA_SAMPLES * 12;
+
 /// Samples per point for estimating its cell's area.
 pub const AREA_SAMPLES: u64 = 64;
 
@@ -47,20 +76,14 @@ fn triangle_point(u: Vec2) -> Vec2 {
 impl AreaParticles {
     /// Spreads about `count` particles (or one per `area` m²) over the diffuse objects.
     pub fn sample(scene: &Scene, count: u32, area: Option<f32>, seed: u64) -> AreaParticles {
-        let diffuse: Vec<usize> = (0..scene.objects.len())
-            .filter(|&i| !scene.materials[scene.objects[i].material as usize].is_specular())
-            .collect();
+        let diffuse = diffuse_objects(scene);
         let areas: Vec<f64> = diffuse.iter().map(|&i| scaled_area(scene, i)).collect();
         let total: f64 = areas.iter().sum();
         let mut out = AreaParticles::default();
         if total <= 0.0 {
             return out;
         }
-        let points_wanted = match area {
-            Some(a) => (total / a as f64).round(),
-            None => (count / 2) as f64,
-        }
-        .max(1.0);
+        let points_wanted = planned_points(count, area, total);
         // Whole points per object by the largest-remainder rule, so counts add up exactly.
         let shares: Vec<f64> = areas.iter().map(|a| points_wanted * a / total).collect();
         let mut points: Vec<u64> = shares.iter().map(|s| s.floor() as u64).collect();
@@ -139,7 +162,7 @@ impl AreaParticles {
     }
 
     pub fn memory_bytes(&self) -> u64 {
-        (self.len() * (4 + 4 + 8 + 12 + 12 + 4)) as u64
+        self.len() as u64 * BYTES_PER_PARTICLE
     }
 }
 

@@ -1,6 +1,9 @@
 //! `photon_reuse` parameters, their defaults and their validation.
 use super::distribution::MapResolution;
-use super::store::PathWord;
+use super::store::{PathStore, PathWord, PhotonRow};
+use super::{grid, pixels};
+use crate::scene::Scene;
+use crate::technique::budget::{product_sum, MemoryEstimate};
 use crate::technique::TechniqueError;
 use serde::{Deserialize, Serialize};
 
@@ -56,7 +59,45 @@ pub const MAX_REFINE: f32 = 0.25;
 /// Largest accepted path count.
 pub const MAX_PATHS: u32 = 16_000_000;
 
+/// Largest `gather_photons`: a gather visits about this many photons per pixel.
+pub const MAX_GATHER_PHOTONS: u32 = 4096;
+
+/// Largest `radius`, as a share of the scene's bounding diagonal: a wider kernel makes every
+/// gather visit a large part of the map.
+pub const MAX_RADIUS_SHARE: f32 = 0.1;
+
 impl PhotonReuseConfig {
+    /// Resident memory on `scene` at `pixels` pixels (`budget.rs`): the path store, the photon
+    /// grid (every photon in it, and one cell per `gather_photons / 4` photons, a cell being
+    /// 2r wide where a disc of radius r holds `gather_photons`) and the kept pixels. Also refuses
+    /// a `radius` wider than [`MAX_RADIUS_SHARE`] of the scene's diagonal.
+    pub fn resident_estimate(&self, scene: &Scene, pixels: u64) -> Result<MemoryEstimate, TechniqueError> {
+        if let Some(r) = self.radius {
+            let diagonal = scene.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length());
+            if r > MAX_RADIUS_SHARE * diagonal {
+                return Err(TechniqueError::TooLarge {
+                    field: "radius".into(),
+                    message: format!(
+                        "{r} m exceeds {MAX_RADIUS_SHARE} of the scene's diagonal ({diagonal} m): every gather would visit much of the map"
+                    ),
+                });
+            }
+        }
+        let paths = u64::from(self.paths);
+        let photons = paths * u64::from(self.max_photons);
+        let cells = photons / u64::from((self.gather_photons / 4).max(1));
+        let with_origins = scene.lights.iter().any(|l| l.mesh.is_some());
+        product_sum(
+            "paths",
+            &[
+                (photons, PhotonRow::BYTES_PER_PHOTON + grid::BYTES_PER_PHOTON),
+                (paths, PathStore::bytes_per_path(with_origins)),
+                (cells, grid::BYTES_PER_CELL),
+                (pixels, pixels::BYTES_PER_PIXEL),
+            ],
+        )
+    }
+
     pub fn validate(&self) -> Result<(), TechniqueError> {
         let bad = |field: &str, message: String| Err(TechniqueError::InvalidConfig { field: field.into(), message });
         if self.paths == 0 || self.paths > MAX_PATHS {
@@ -71,8 +112,8 @@ impl PhotonReuseConfig {
         if let Err(message) = self.distribution_map.validate() {
             return bad("distribution_map", message);
         }
-        if self.gather_photons == 0 {
-            return bad("gather_photons", "must be at least 1".into());
+        if self.gather_photons == 0 || self.gather_photons > MAX_GATHER_PHOTONS {
+            return bad("gather_photons", format!("must lie in 1..={MAX_GATHER_PHOTONS}"));
         }
         if let Some(r) = self.radius {
             if !(r.is_finite() && r > 0.0) {

@@ -56,6 +56,11 @@ pub struct ChangedPhotons {
     pub added: Vec<GridPhoton>,
 }
 
+/// Bytes the grid holds per photon (the photon, its place in `order` and `home`) and per
+/// occupied cell (the cell and its index entry), as `memory_bytes` counts them.
+pub const BYTES_PER_PHOTON: u64 = (std::mem::size_of::<GridPhoton>() + 8) as u64;
+pub const BYTES_PER_CELL: u64 = (std::mem::size_of::<Cell>() + std::mem::size_of::<[i32; 3]>() + 4) as u64;
+
 #[derive(Clone, Debug, Default, PartialEq)]
 struct Cell {
     coord: [i32; 3],

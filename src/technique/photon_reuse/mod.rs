@@ -434,7 +434,13 @@ impl PhotonReuse {
                         (tests + made, failed)
                     },
                 )
-                .reduce(|| (0, Vec::new()), |a, b| (a.0 + b.0, [a.1, b.1].concat()));
+                .reduce(
+                    || (0, Vec::new()),
+                    |(tests, mut failed), (more, rest)| {
+                        failed.extend(rest);
+                        (tests + more, failed)
+                    },
+                );
             self.pending.verify_box_tests += tests;
             for (i, r) in failed {
                 plan[i] = Some(r);
@@ -454,7 +460,14 @@ impl PhotonReuse {
                     (tests + t, rays + r, decided)
                 },
             )
-            .reduce(|| (0, 0, Vec::new()), |a, b| (a.0 + b.0, a.1 + b.1, [a.2, b.2].concat()));
+            .reduce(
+                || (0, 0, Vec::new()),
+                // Moved, not cloned: each `Checked` owns its moved photons.
+                |(tests, rays, mut decided), (more_tests, more_rays, rest)| {
+                    decided.extend(rest);
+                    (tests + more_tests, rays + more_rays, decided)
+                },
+            );
         self.pending.verify_box_tests += tests;
         self.pending.verify_rays += rays;
         let moved_photons = !decided.is_empty();

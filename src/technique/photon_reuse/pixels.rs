@@ -65,6 +65,9 @@ pub struct Moves<'a> {
     pub slack: f32,
 }
 
+/// Bytes kept per pixel: its sample and its footprint, as `memory_bytes` counts them.
+pub const BYTES_PER_PIXEL: u64 = (std::mem::size_of::<PixelSample>() + 4) as u64;
+
 /// The kept camera samples of the current camera, one per pixel.
 #[derive(Clone, Debug, Default)]
 pub struct PixelCache {

@@ -24,6 +24,10 @@ pub struct PhotonRow {
 }
 
 impl PhotonRow {
+    /// Bytes per photon: position, incoming, object, triangle and power.
+    pub const BYTES_PER_PHOTON: u64 =
+        (2 * std::mem::size_of::<Vec3>() + 2 * std::mem::size_of::<u32>() + std::mem::size_of::<Rgb>()) as u64;
+
     fn with_len(n: usize) -> PhotonRow {
         PhotonRow {
             position: vec![Vec3::ZERO; n],
@@ -167,6 +171,16 @@ impl PathStore {
             escape: vec![Vec3::ZERO; paths],
             generation: vec![0; paths],
         }
+    }
+
+    /// Bytes per path besides its photons: word, light, origin (only `with_origins`), segment-0
+    /// direction and flux, escape direction and generation.
+    pub fn bytes_per_path(with_origins: bool) -> u64 {
+        let v = std::mem::size_of::<Vec3>() as u64;
+        let origin = if with_origins { v } else { 0 };
+        (std::mem::size_of::<PathWord>() + std::mem::size_of::<u16>() + std::mem::size_of::<Rgb>() + 4) as u64
+            + 2 * v
+            + origin
     }
 
     /// What the store's allocations hold, measured from the vectors themselves.
