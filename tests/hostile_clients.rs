@@ -257,3 +257,95 @@ async fn concurrent_creations_never_exceed_max_sessions() {
     assert_eq!(s.state.session_count(), 2);
     s.shutdown().await.unwrap();
 }
+
+/// A GET of `path` with the given headers; the status and the `Access-Control-Allow-Origin`
+/// answer, if any.
+async fn get_with(s: &TestServer, path: &str, headers: &[(&str, &str)]) -> (u16, Option<String>) {
+    let mut req = s.http.get(s.url(path));
+    for (k, v) in headers {
+        req = req.header(*k, *v);
+    }
+    let r = req.send().await.expect("request");
+    let cors = r.headers().get("access-control-allow-origin").and_then(|v| v.to_str().ok()).map(str::to_string);
+    (r.status().as_u16(), cors)
+}
+
+/// Opens the session's WebSocket with an `Origin` header; the HTTP status of a refusal, or 101.
+async fn upgrade_from(s: &TestServer, id: &str, origin: &str) -> u16 {
+    use tokio_tungstenite::tungstenite::client::IntoClientRequest;
+    let mut req = s.ws_url(&format!("/v1/sessions/{id}/ws")).into_client_request().expect("request");
+    req.headers_mut().insert("origin", origin.parse().expect("header"));
+    match tokio_tungstenite::connect_async(req).await {
+        Ok(_) => 101,
+        Err(tokio_tungstenite::tungstenite::Error::Http(r)) => r.status().as_u16(),
+        Err(e) => panic!("upgrade from {origin}: {e}"),
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn browser_origins_are_held_to_the_host_and_origin_lists() {
+    // Hazards: a DNS-rebinding page reached loopback under its own name; any page could open a
+    // session's WebSocket; nothing said whether CORS was on. Now: names outside the Host list
+    // get 421, cross-origin upgrades 403, and CORS answers only configured origins.
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let access =
+        relume::server::Access { hosts: vec!["relume.test".into()], origins: vec!["https://app.example".into()] };
+    let s = TestServer::start_with_access(listener, None, Limits::default(), access).await;
+    let port = s.addr.port();
+    for (host, want) in [
+        (format!("rebind.attacker.example:{port}"), 421),
+        (format!("localhost:{port}"), 200),
+        (format!("127.0.0.1:{port}"), 200),
+        (format!("[::1]:{port}"), 200),
+        (format!("relume.test:{port}"), 200),
+    ] {
+        assert_eq!(get_with(&s, "/healthz", &[("host", &host)]).await.0, want, "Host {host}");
+    }
+    let id = s.session(small("cornell-box")).await;
+    assert_eq!(upgrade_from(&s, &id, "http://evil.example").await, 403);
+    assert_eq!(upgrade_from(&s, &id, &format!("http://{}", s.addr)).await, 101, "same origin");
+    assert_eq!(upgrade_from(&s, &id, "https://app.example").await, 101, "configured origin");
+    let origin = |o: &'static str| [("origin", o)];
+    assert_eq!(
+        get_with(&s, "/v1/scenes", &origin("https://app.example")).await.1.as_deref(),
+        Some("https://app.example")
+    );
+    assert_eq!(get_with(&s, "/v1/scenes", &origin("http://evil.example")).await.1, None);
+    s.shutdown().await.unwrap();
+    // With no origins configured, no CORS header is sent at all.
+    let s = TestServer::start(None, Limits::default()).await;
+    assert_eq!(get_with(&s, "/v1/scenes", &origin("https://app.example")).await.1, None);
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn idle_sessions_expire_and_their_sockets_are_told() {
+    // Hazard: nothing expired sessions, and each photon_reuse session holds hundreds of MiB.
+    // A session left alone for longer than session_idle is deleted and its WebSocket closed
+    // with 4410 and a JSON reason; a twin kept busy with requests survives the same wait.
+    let limits = Limits { session_idle: std::time::Duration::from_millis(1500), ..Limits::default() };
+    let s = TestServer::start(None, limits).await;
+    let idle = s.session(small("cornell-box")).await;
+    let busy = s.session(small("cornell-box")).await;
+    let (mut ws, _) = tokio_tungstenite::connect_async(s.ws_url(&format!("/v1/sessions/{idle}/ws"))).await.expect("ws");
+    let started = std::time::Instant::now();
+    while started.elapsed() < std::time::Duration::from_millis(4500) {
+        let (status, _) = get_with(&s, &format!("/v1/sessions/{busy}"), &[]).await;
+        assert_eq!(status, 200, "the busy session expired");
+        tokio::time::sleep(std::time::Duration::from_millis(250)).await;
+    }
+    assert_eq!(get_with(&s, &format!("/v1/sessions/{idle}"), &[]).await.0, 404, "the idle session survived");
+    let closed = loop {
+        use futures_util::StreamExt;
+        match tokio::time::timeout(std::time::Duration::from_secs(5), ws.next()).await.expect("a close in time") {
+            Some(Ok(tokio_tungstenite::tungstenite::Message::Close(frame))) => break frame,
+            Some(Ok(_)) => continue,
+            other => panic!("socket ended without a close frame: {other:?}"),
+        }
+    };
+    let frame = closed.expect("a close frame with a code");
+    assert_eq!(u16::from(frame.code), 4410);
+    let reason: Value = serde_json::from_str(&frame.reason).expect("a JSON reason");
+    assert_eq!(reason["error"], "session_closed");
+    s.shutdown().await.unwrap();
+}

@@ -136,6 +136,14 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
     // Keep a screenshot for people to look at (target/ is never committed).
     let shot = c.screenshot().await.unwrap();
     std::fs::write(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target/viewer-test.png"), shot).unwrap();
+    // Leaving the page deletes its session (pagehide), rather than leaving it to expire.
+    assert_eq!(server.state.session_count(), 1);
+    c.goto("about:blank").await.unwrap();
+    let left = std::time::Instant::now();
+    while server.state.session_count() > 0 && left.elapsed() < Duration::from_secs(10) {
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    assert_eq!(server.state.session_count(), 0, "the viewer left its session behind");
     c.close().await.unwrap();
     server.shutdown().await.unwrap();
 }

@@ -13,6 +13,8 @@ const TICK_BUCKETS: [f64; 12] = [0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 
 #[derive(Default)]
 pub struct Metrics {
     pub sessions_created: AtomicU64,
+    /// Sessions deleted for being idle longer than `--session-idle`.
+    pub sessions_expired: AtomicU64,
     pub sessions_failed: AtomicU64,
     pub ticks: AtomicU64,
     pub rays: AtomicU64,
@@ -69,6 +71,11 @@ impl Metrics {
             let _ = writeln!(out, "# HELP relume_{name} {help}\n# TYPE relume_{name} counter\nrelume_{name} {value}");
         };
         counter("sessions_created_total", "Sessions created.", get(&self.sessions_created));
+        counter(
+            "sessions_expired_total",
+            "Sessions deleted after --session-idle without activity.",
+            get(&self.sessions_expired),
+        );
         counter("sessions_failed_total", "Sessions marked failed after a panic or error.", get(&self.sessions_failed));
         counter("ticks_total", "Ticks run.", get(&self.ticks));
         counter("rays_total", "Rays traced.", get(&self.rays));

@@ -17,7 +17,7 @@ pub mod worker;
 pub mod ws;
 
 pub use error::ApiError;
-pub use state::{AppState, Limits, ServerConfig};
+pub use state::{Access, AppState, Limits, ServerConfig};
 
 use axum::extract::{DefaultBodyLimit, Request, State};
 use axum::http::StatusCode;
@@ -65,6 +65,52 @@ async fn require_token(State(s): State<Shared>, req: Request, next: Next) -> Res
     Ok(next.run(req).await)
 }
 
+/// Refuses a `Host` that is not an IP literal, `localhost` or a configured name with 421: a
+/// page that rebinds its own DNS name to 127.0.0.1 reaches the server under that name. A
+/// request without `Host` (HTTP/1.0) is let through: rebinding needs a name.
+async fn check_host(State(s): State<Shared>, req: Request, next: Next) -> Result<Response, ApiError> {
+    if let Some(host) = req.headers().get(axum::http::header::HOST) {
+        let host = host.to_str().unwrap_or_default();
+        let name = host_name(host);
+        let allowed = name.eq_ignore_ascii_case("localhost")
+            || name.parse::<std::net::IpAddr>().is_ok()
+            || s.config.access.hosts.iter().any(|h| h.eq_ignore_ascii_case(name));
+        if !allowed {
+            return Err(ApiError::new(
+                StatusCode::MISDIRECTED_REQUEST,
+                "host_not_allowed",
+                format!("Host '{host}' is not served here: use an IP address or localhost, or start the server with --allow-host {name}"),
+            ));
+        }
+    }
+    Ok(next.run(req).await)
+}
+
+/// The name part of a `Host` value: `[::1]:8080` → `::1`, `localhost:80` → `localhost`.
+pub fn host_name(host: &str) -> &str {
+    match host.strip_prefix('[') {
+        Some(rest) => rest.split(']').next().unwrap_or_default(),
+        None => host.rsplit_once(':').map_or(host, |(name, _)| name),
+    }
+}
+
+/// Deletes idle sessions every eighth of `--session-idle` (at least every second) until the
+/// server shuts down.
+async fn expire_idle(state: Arc<AppState>) {
+    let period = (state.config.limits.session_idle / 8).max(std::time::Duration::from_secs(1));
+    let mut closing = state.shutting_down.subscribe();
+    let mut tick = tokio::time::interval(period);
+    loop {
+        tokio::select! {
+            _ = tick.tick() => {
+                let s = state.clone();
+                let _ = tokio::task::spawn_blocking(move || s.expire_idle_blocking()).await;
+            }
+            _ = closing.changed() => return,
+        }
+    }
+}
+
 /// Counts every 4xx/5xx answer by its `error` code for `/metrics`.
 async fn count_rejections(State(s): State<Shared>, req: Request, next: Next) -> Response {
     let resp = next.run(req).await;
@@ -82,6 +128,8 @@ async fn count_rejections(State(s): State<Shared>, req: Request, next: Next) -> 
             StatusCode::PAYLOAD_TOO_LARGE => "too_large",
             StatusCode::UNPROCESSABLE_ENTITY => "invalid",
             StatusCode::TOO_MANY_REQUESTS => "too_many_sessions",
+            StatusCode::MISDIRECTED_REQUEST => "host_not_allowed",
+            StatusCode::FORBIDDEN => "origin_not_allowed",
             _ if status.is_server_error() => "internal",
             _ => "other",
         };
@@ -133,7 +181,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/sessions/{id}/ws", get(ws::upgrade))
         .route("/sessions/{id}/{file}", get(routes::get_frame))
         .layer(middleware::from_fn_with_state(state.clone(), require_token));
-    Router::new()
+    let app = Router::new()
         .route("/", get(routes::viewer_page))
         .route("/viewer.js", get(routes::viewer_script))
         .route("/viewer.css", get(routes::viewer_style))
@@ -141,11 +189,28 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/metrics", get(routes::metrics))
         .nest("/v1", v1)
         .fallback(routes::not_found)
+        .layer(middleware::from_fn_with_state(state.clone(), check_host))
         .layer(middleware::from_fn_with_state(state.clone(), count_rejections))
         .layer(DefaultBodyLimit::max(limits.max_body_bytes))
         .layer(TimeoutLayer::with_status_code(StatusCode::REQUEST_TIMEOUT, limits.request_timeout))
-        .layer(middleware::from_fn(json_errors))
-        .with_state(state)
+        .layer(middleware::from_fn(json_errors));
+    let app = match cors(&state.config.access.origins) {
+        Some(c) => app.layer(c),
+        None => app,
+    };
+    app.with_state(state)
+}
+
+/// CORS for the configured origins only; `None` (no CORS headers at all) when there are none.
+fn cors(origins: &[String]) -> Option<tower_http::cors::CorsLayer> {
+    use axum::http::{header, HeaderValue, Method};
+    let allowed: Vec<HeaderValue> = origins.iter().filter_map(|o| HeaderValue::from_str(o).ok()).collect();
+    (!allowed.is_empty()).then(|| {
+        tower_http::cors::CorsLayer::new()
+            .allow_origin(allowed)
+            .allow_methods([Method::GET, Method::POST, Method::DELETE])
+            .allow_headers([header::CONTENT_TYPE, header::AUTHORIZATION])
+    })
 }
 
 /// Serves `listener` until `shutdown` resolves, then stops every session.
@@ -155,6 +220,7 @@ pub async fn run(
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> std::io::Result<()> {
     let closing = state.shutting_down.clone();
+    tokio::spawn(expire_idle(state.clone()));
     let signal = async move {
         shutdown.await;
         closing.send_replace(true);

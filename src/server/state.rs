@@ -37,6 +37,8 @@ pub struct Limits {
     pub session_memory: u64,
     pub server_memory: u64,
     pub max_tick_hz: f32,
+    /// A session with no request and no WebSocket message (or pong) for this long is deleted.
+    pub session_idle: Duration,
     /// How long `GET frame?tick=N` waits for tick N.
     pub frame_wait: Duration,
     pub request_timeout: Duration,
@@ -77,6 +79,7 @@ impl Default for Limits {
             session_memory: 2 << 30,
             server_memory: 16 << 30,
             max_tick_hz: 120.0,
+            session_idle: Duration::from_secs(600),
             frame_wait: Duration::from_secs(10),
             request_timeout: Duration::from_secs(60),
         }
@@ -91,6 +94,19 @@ pub struct ServerConfig {
     /// Cap on Embree's kernel family (`None`: the widest this CPU has).
     pub isa: Option<crate::embree::Isa>,
     pub limits: Limits,
+    pub access: Access,
+}
+
+/// Who may reach the server from a browser.
+///
+/// - `hosts`: host names accepted in the `Host` header besides IP literals and `localhost`
+///   (anything else is 421: a DNS-rebinding page reaches loopback under its own name).
+/// - `origins`: origins (`https://app.example:8443`) that may open WebSockets from another
+///   origin and read responses through CORS. CORS is off when it is empty.
+#[derive(Clone, Debug, Default)]
+pub struct Access {
+    pub hosts: Vec<String>,
+    pub origins: Vec<String>,
 }
 
 /// What the server remembers about a session besides its worker.
@@ -106,6 +122,8 @@ pub struct SessionEntry {
     pub tick_hz: Option<f32>,
     /// Its estimated resident memory.
     pub memory_bytes: u64,
+    /// Milliseconds after the server's start of the last request or WebSocket message.
+    last_active: AtomicU64,
     pub handle: SessionHandle,
     /// Its place in the session count and the memory budget, released when the entry drops.
     _reservation: Reservation,
@@ -165,6 +183,8 @@ pub struct AppState {
     pub sessions: RwLock<HashMap<String, Arc<SessionEntry>>>,
     reserved: Arc<std::sync::Mutex<Reserved>>,
     next_id: AtomicU64,
+    /// The clock of every session's `last_active`.
+    started: std::time::Instant,
     /// Flips to true when the server begins shutting down; WebSocket loops watch it.
     pub shutting_down: tokio::sync::watch::Sender<bool>,
 }
@@ -187,17 +207,53 @@ impl AppState {
             sessions: RwLock::new(HashMap::new()),
             reserved: Arc::default(),
             next_id: AtomicU64::new(1),
+            started: std::time::Instant::now(),
             shutting_down,
         })
     }
 
+    /// The session `id`, marked active now (every route and WebSocket message comes here).
     pub fn session(&self, id: &str) -> Result<Arc<SessionEntry>, ApiError> {
-        self.sessions
+        let entry = self
+            .sessions
             .read()
             .map_err(|_| ApiError::internal("session table lock poisoned"))?
             .get(id)
             .cloned()
-            .ok_or_else(|| ApiError::not_found(format!("no session '{id}'")))
+            .ok_or_else(|| ApiError::not_found(format!("no session '{id}'")))?;
+        self.touch(&entry);
+        Ok(entry)
+    }
+
+    /// Marks `entry` active now.
+    pub fn touch(&self, entry: &SessionEntry) {
+        entry.last_active.store(self.now_ms(), Ordering::Relaxed);
+    }
+
+    fn now_ms(&self) -> u64 {
+        self.started.elapsed().as_millis() as u64
+    }
+
+    /// Deletes every session idle for longer than `session_idle` (blocking: call from
+    /// `spawn_blocking`). Returns the ids it deleted.
+    pub fn expire_idle_blocking(&self) -> Vec<String> {
+        let idle = self.config.limits.session_idle.as_millis() as u64;
+        let now = self.now_ms();
+        let expired: Vec<String> = match self.sessions.read() {
+            Ok(s) => s
+                .values()
+                .filter(|e| now.saturating_sub(e.last_active.load(Ordering::Relaxed)) > idle)
+                .map(|e| e.id.clone())
+                .collect(),
+            Err(_) => return Vec::new(),
+        };
+        for id in &expired {
+            if self.remove_session_blocking(id).is_ok() {
+                self.metrics.sessions_expired.fetch_add(1, Ordering::Relaxed);
+                tracing::info!(target: "relume::server", "session {id} expired after {} s idle", idle / 1000);
+            }
+        }
+        expired
     }
 
     pub fn session_count(&self) -> usize {
@@ -326,6 +382,7 @@ impl AppState {
             seed: req.seed,
             tick_hz: req.tick_hz,
             memory_bytes,
+            last_active: AtomicU64::new(self.now_ms()),
             handle,
             _reservation: reservation,
         });

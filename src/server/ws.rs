@@ -20,15 +20,48 @@ use axum::response::Response;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
+/// Close code sent when the session is deleted (by a client or for being idle) while the
+/// socket is open; the reason is a JSON `{error, detail}`.
+pub const CLOSE_SESSION_GONE: u16 = 4410;
+
+/// How often the server pings an open socket; a pong counts as activity, so an open viewer
+/// keeps its session from expiring.
+const PING_EVERY: std::time::Duration = std::time::Duration::from_secs(30);
+
 pub async fn upgrade(
     State(s): State<Shared>,
     Path(id): Path<String>,
+    headers: axum::http::HeaderMap,
     ws: WebSocketUpgrade,
 ) -> Result<Response, ApiError> {
+    check_origin(&s, &headers)?;
     let entry = s.session(&id)?;
     // One size limit for HTTP bodies and WebSocket messages (the library's default is 64 MiB).
     let limit = s.config.limits.max_body_bytes;
     Ok(ws.max_message_size(limit).max_frame_size(limit).on_upgrade(move |socket| serve(socket, s, entry)))
+}
+
+/// A browser's upgrade must come from the page's own origin (its authority equals `Host`) or
+/// from a configured `--allow-origin`; clients that send no `Origin` (not browsers) pass.
+fn check_origin(s: &Shared, headers: &axum::http::HeaderMap) -> Result<(), ApiError> {
+    let Some(origin) = headers.get(axum::http::header::ORIGIN) else { return Ok(()) };
+    let origin = origin.to_str().unwrap_or_default();
+    let host = headers.get(axum::http::header::HOST).and_then(|h| h.to_str().ok()).unwrap_or_default();
+    let authority = origin.split_once("://").map_or("", |(_, rest)| rest);
+    let same = !host.is_empty() && authority.eq_ignore_ascii_case(host);
+    if same || s.config.access.origins.iter().any(|o| o.eq_ignore_ascii_case(origin)) {
+        return Ok(());
+    }
+    Err(ApiError::new(
+        axum::http::StatusCode::FORBIDDEN,
+        "origin_not_allowed",
+        format!("a page from {origin} may not open this WebSocket: start the server with --allow-origin {origin}"),
+    ))
+}
+
+fn close(code: u16, error: &str, detail: &str) -> Message {
+    let reason = serde_json::json!({"error": error, "detail": detail}).to_string();
+    Message::Close(Some(axum::extract::ws::CloseFrame { code, reason: reason.into() }))
 }
 
 struct Subscription {
@@ -52,9 +85,11 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
     let mut sub = Subscription { frames: FrameFormat::Png, stats: true, every: 1 };
     let mut last_seen: Option<u64> = None;
     let mut dropped = 0u64;
+    let mut ping = tokio::time::interval_at(tokio::time::Instant::now() + PING_EVERY, PING_EVERY);
     loop {
         tokio::select! {
             incoming = socket.recv() => {
+                state.touch(&entry);
                 let reply = match incoming {
                     Some(Ok(Message::Text(t))) => handle(&state, &entry, &mut sub, t.as_bytes()).await,
                     Some(Ok(Message::Binary(_))) => Some(error_message(&ApiError::bad_request("binary messages are for frames; send JSON text"))),
@@ -67,8 +102,15 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
                     }
                 }
             }
+            _ = ping.tick() => {
+                if socket.send(Message::Ping(Default::default())).await.is_err() {
+                    break;
+                }
+            }
             changed = frames.changed() => {
                 if changed.is_err() {
+                    let detail = format!("session {} was deleted (by a client, or idle for longer than --session-idle)", entry.id);
+                    let _ = socket.send(close(CLOSE_SESSION_GONE, "session_closed", &detail)).await;
                     break;
                 }
                 let Some(frame) = frames.borrow_and_update().clone() else { continue };
@@ -116,7 +158,7 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
                 }
             }
             _ = closing.changed() => {
-                let _ = socket.send(Message::Close(None)).await;
+                let _ = socket.send(close(axum::extract::ws::close_code::AWAY, "shutting_down", "the server is shutting down")).await;
                 break;
             }
         }

@@ -162,6 +162,8 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         let status = resp.status();
         let v: serde_json::Value = resp.json().await.unwrap_or_default();
         if !status.is_success() {
+            // Those created so far would otherwise wait out the server's idle expiry.
+            delete_sessions(&http, &base, &ids).await;
             return Err(anyhow::anyhow!("creating a session: {status}: {}", v["detail"].as_str().unwrap_or("")));
         }
         ids.push(v["id"].as_str().unwrap_or_default().to_string());
@@ -187,9 +189,7 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
     }
     let elapsed = started.elapsed().as_secs_f64();
     let (rss_end, encode_end, tick_end) = server_figures(&http, &base).await;
-    for id in &ids {
-        let _ = http.delete(format!("{base}/v1/sessions/{id}")).send().await;
-    }
+    delete_sessions(&http, &base, &ids).await;
 
     let mut lat: Vec<f64> = reports.iter().flat_map(|r| r.latencies_ms.iter().copied()).collect();
     lat.sort_by(f64::total_cmp);
@@ -383,4 +383,11 @@ pub fn run(args: LoadArgs) -> Result<()> {
         return Err(anyhow::anyhow!("{} errors, {} edits lost", report.errors, report.lost_edits));
     }
     Ok(())
+}
+
+/// Deletes the sessions this run created (best effort: the server expires what is left).
+async fn delete_sessions(http: &reqwest::Client, base: &str, ids: &[String]) {
+    for id in ids {
+        let _ = http.delete(format!("{base}/v1/sessions/{id}")).send().await;
+    }
 }

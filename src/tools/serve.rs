@@ -1,6 +1,6 @@
 //! `relume serve`: runs the HTTP/WebSocket service until SIGINT or SIGTERM.
 use super::UsageError;
-use crate::server::{self, AppState, Limits, ServerConfig};
+use crate::server::{self, Access, AppState, Limits, ServerConfig};
 use anyhow::{Context, Result};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -27,6 +27,17 @@ pub struct ServeArgs {
     /// machine's RAM); a session that would exceed it is refused with 429.
     #[arg(long)]
     pub server_memory: Option<u64>,
+    /// Seconds without a request or WebSocket message after which a session is deleted.
+    #[arg(long, default_value_t = 600)]
+    pub session_idle: u64,
+    /// A host name the `Host` header may carry besides IP addresses and localhost (repeat for
+    /// more); other names get 421, which stops DNS rebinding.
+    #[arg(long = "allow-host")]
+    pub allow_hosts: Vec<String>,
+    /// An origin (`https://app.example:8443`) whose pages may open WebSockets and read
+    /// responses through CORS (repeat for more). CORS is off without it.
+    #[arg(long = "allow-origin")]
+    pub allow_origins: Vec<String>,
     /// Rendering threads shared by all sessions (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -52,6 +63,9 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
     if args.max_sessions == 0 {
         return Err(UsageError("--max-sessions must be at least 1".into()).into());
     }
+    if args.session_idle == 0 {
+        return Err(UsageError("--session-idle must be at least 1 second".into()).into());
+    }
     if args.session_memory == 0 || args.server_memory == Some(0) {
         return Err(UsageError("--session-memory and --server-memory must be at least 1 MiB".into()).into());
     }
@@ -66,8 +80,10 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
             max_sessions: args.max_sessions,
             session_memory: args.session_memory << 20,
             server_memory,
+            session_idle: std::time::Duration::from_secs(args.session_idle),
             ..Limits::default()
         },
+        access: Access { hosts: args.allow_hosts.clone(), origins: args.allow_origins.clone() },
     })
 }
 

@@ -1,5 +1,5 @@
 //! A real relume server on 127.0.0.1:0 for tests, with an HTTP and a WebSocket client.
-use relume::server::{self, AppState, Limits, ServerConfig};
+use relume::server::{self, Access, AppState, Limits, ServerConfig};
 use std::net::SocketAddr;
 use std::path::Path;
 use std::sync::Arc;
@@ -29,12 +29,23 @@ impl TestServer {
     }
 
     pub async fn start_on(listener: tokio::net::TcpListener, token: Option<&str>, limits: Limits) -> TestServer {
+        TestServer::start_with_access(listener, token, limits, Access::default()).await
+    }
+
+    /// A server that also accepts the given `Host` names and browser origins.
+    pub async fn start_with_access(
+        listener: tokio::net::TcpListener,
+        token: Option<&str>,
+        limits: Limits,
+        access: Access,
+    ) -> TestServer {
         let config = ServerConfig {
             scenes_root: Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").canonicalize().unwrap(),
             token: token.map(str::to_string),
             threads: 2,
             isa: None,
             limits,
+            access,
         };
         let state = Arc::new(AppState::new(config).expect("server state"));
         let addr = listener.local_addr().unwrap();

@@ -176,6 +176,10 @@ function installDrag() {
 }
 
 $("start").addEventListener("click", start);
+// Leaving the page deletes its session rather than leaving it to the server's idle expiry.
+window.addEventListener("pagehide", () => {
+  if (state.id) api(`/v1/sessions/${state.id}`, { method: "DELETE", keepalive: true }).catch(() => {});
+});
 $("target").addEventListener("change", setSliders);
 ["tx", "ty", "tz", "turn"].forEach((id) => $(id).addEventListener("input", scheduleMove));
 $("play").addEventListener("click", () => state.ws && state.ws.send(JSON.stringify({ type: "play", anim: $("animation").value, speed: 1 })));
