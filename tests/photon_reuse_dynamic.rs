@@ -311,3 +311,47 @@ fn a_light_switched_on_gets_its_share_of_paths() {
     assert!(flux_gap(on.grid_power, twin.grid_power) <= 1e-9, "{:?} vs {:?}", on.grid_power, twin.grid_power);
     assert!(flux_gap(dark.grid_power, twin.grid_power) > 0.5, "the dark map passed: {:?}", dark.grid_power);
 }
+
+#[test]
+fn repeated_material_edits_do_not_inflate_indirect_light() {
+    // Ten alternating edits of the white material (to a tint and back) in error mode end on
+    // the original material, so the photon map must carry the flux it carried before them:
+    // over 8 seeds, the mean relative change of each channel is within a Student-t bound
+    // (99.9%, 7 degrees of freedom) of zero. Negative control: after an odd number of edits
+    // (ending on the tint) the same test must see the change.
+    let tint = relume::scene::Material::Diffuse { reflectance: relume::core::Rgb::new(0.4, 0.6, 0.8) };
+    let white = relume::scene::Material::Diffuse { reflectance: relume::core::Rgb::splat(0.73) };
+    let edit = |m: &relume::scene::Material| Edit::Material { name: "white".into(), material: m.clone() };
+    let device = Device::new(2).unwrap();
+    let mut scene = load("cornell-box.json");
+    scene.set_resolution(8, 8);
+    let (mut even, mut odd) = (Vec::new(), Vec::new());
+    for seed in 0..8u64 {
+        let c =
+            PhotonReuseConfig { paths: 60_000, reuse: ReuseMode::Error, refine: 0.0, ..PhotonReuseConfig::default() };
+        let mut s = session(scene.clone(), c, 100 + seed, &device);
+        let before = photon_stats(&s.tick().unwrap()).grid_power;
+        let mut after = before;
+        for k in 0..10 {
+            s.queue_edits(vec![edit(if k % 2 == 0 { &tint } else { &white })]).unwrap();
+            after = photon_stats(&s.tick().unwrap()).grid_power;
+            if k == 8 {
+                odd.push((0..3).map(|c| after[c] / before[c] - 1.0).collect::<Vec<f64>>());
+            }
+        }
+        even.push((0..3).map(|c| after[c] / before[c] - 1.0).collect::<Vec<f64>>());
+    }
+    let t = student_t_999(8);
+    let within = |changes: &[Vec<f64>], c: usize| {
+        let n = changes.len() as f64;
+        let mean = changes.iter().map(|d| d[c]).sum::<f64>() / n;
+        let var = changes.iter().map(|d| (d[c] - mean).powi(2)).sum::<f64>() / (n - 1.0);
+        let bound = t * (var / n).sqrt();
+        eprintln!("channel {c}: mean change {mean:+.5} (bound {bound:.5})");
+        mean.abs() <= bound
+    };
+    for c in 0..3 {
+        assert!(within(&even, c), "channel {c}: ten edits changed the indirect flux");
+    }
+    assert!((0..3).any(|c| !within(&odd, c)), "the control (ending on the tint) passed");
+}
