@@ -51,6 +51,9 @@ pub struct Changes {
     cover: Vec<Aabb>,
     /// `moved[object]`: the object moved this tick.
     pub moved: Vec<bool>,
+    /// `translated[object]`: it moved without turning or scaling, so its surface normals and
+    /// every BSDF weight on it are what they were.
+    pub translated: Vec<bool>,
     /// `previous_material[object]`: the object's material before this tick's edit, if edited.
     pub previous_material: Vec<Option<Material>>,
     /// `flagged[object]`: moved or its material edited (a segment ending on it needs a look).
@@ -62,11 +65,13 @@ impl Changes {
     pub fn new(scene: &Scene, delta: &SceneDelta, slack: f32) -> Changes {
         let mut boxes = Vec::new();
         let mut moved = vec![false; scene.objects.len()];
+        let mut translated = vec![false; scene.objects.len()];
         for m in &delta.moved {
             boxes.push(widened(&m.old_bounds, slack));
             boxes.push(widened(&m.new_bounds, slack));
             if let SurfaceId::Object(o) = m.surface {
                 moved[o as usize] = true;
+                translated[o as usize] = m.old_world_from_object.matrix3 == m.new_world_from_object.matrix3;
             }
         }
         let previous_material: Vec<Option<Material>> = scene
@@ -80,7 +85,7 @@ impl Changes {
         let flagged = moved.iter().zip(&previous_material).map(|(&m, p)| m || p.is_some()).collect();
         let boxes = BoxTree::new(boxes);
         let cover = boxes.cover(COVER_BOXES);
-        Changes { boxes, cover, moved, previous_material, flagged }
+        Changes { boxes, cover, moved, translated, previous_material, flagged }
     }
 
     /// Whether the segment from `start` to `end` may touch the cover. A finite segment lies in
