@@ -349,3 +349,30 @@ async fn idle_sessions_expire_and_their_sockets_are_told() {
     assert_eq!(reason["error"], "session_closed");
     s.shutdown().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_accepted_batch_is_numbered_and_ticks_say_which_are_applied() {
+    // Hazard: a client could not tell whether an edit it sent had been applied, coalesced or
+    // lost. Each accepted batch now gets a sequence number, a refused one none, and each tick
+    // reports the last number it applied.
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(small("bunnies-1")).await;
+    let edits = format!("/v1/sessions/{id}/edits");
+    let tick = format!("/v1/sessions/{id}/tick");
+    let (_, body) = post(&s, &tick, json!({})).await;
+    assert_eq!(body["stats"]["edits_applied_through"], 0, "{body}");
+    let camera = |z: f64| json!({"edits": [{"target": "camera", "position": [278, 273, z]}]});
+    let (status, first) = post(&s, &edits, camera(-800.0)).await;
+    assert_eq!((status, first["seq"].as_u64()), (202, Some(1)), "{first}");
+    let (status, _) = post(&s, &edits, json!({"edits": [{"target": "object", "name": "nope", "transform": {}}]})).await;
+    assert_eq!(status, 422);
+    let (status, second) = post(&s, &edits, camera(-900.0)).await;
+    assert_eq!((status, second["seq"].as_u64()), (202, Some(2)), "a refused batch took a number: {second}");
+    let (_, body) = post(&s, &tick, json!({})).await;
+    assert_eq!(body["stats"]["edits_applied_through"], 2, "{body}");
+    assert_eq!(
+        (body["stats"]["edits_received"].as_u64(), body["stats"]["edits_coalesced"].as_u64()),
+        (Some(2), Some(1))
+    );
+    s.shutdown().await.unwrap();
+}

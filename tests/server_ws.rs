@@ -27,7 +27,7 @@ async fn edits_tick_frame_and_the_frame_changes_after_a_move() {
     send(&mut ws, json!({"type": "subscribe", "frames": "png", "stats": true, "every": 1})).await;
     send(&mut ws, json!({"type": "edits", "edits": [bunny_at(150.0)]})).await;
     let ack = next_text(&mut ws).await;
-    assert_eq!(ack, json!({"type": "edits_accepted", "queued": 1, "pending": 1}));
+    assert_eq!(ack, json!({"type": "edits_accepted", "queued": 1, "pending": 1, "seq": 1}));
     send(&mut ws, json!({"type": "tick"})).await;
     let stats = next_text(&mut ws).await;
     assert_eq!(stats["type"], "stats");

@@ -72,6 +72,8 @@ pub struct Session {
     pending: Vec<Edit>,
     /// Edits received into `pending` since the last tick, before coalescing.
     pending_received: usize,
+    /// Sequence number of the last accepted edit batch (the first is 1).
+    accepted_batches: u64,
 }
 
 impl Session {
@@ -89,6 +91,7 @@ impl Session {
             tick: 0,
             pending: Vec::new(),
             pending_received: 0,
+            accepted_batches: 0,
         })
     }
 
@@ -116,12 +119,14 @@ impl Session {
     /// Validates edits against the current scene with the pending edits merged in (two
     /// batches each valid alone, such as a camera position and a look-at at that position,
     /// may not be valid together), and queues them for the next tick, coalesced. A rejected
-    /// batch queues nothing, so an accepted edit never fails a tick.
-    pub fn queue_edits(&mut self, batch: Vec<Edit>) -> Result<(), SceneError> {
+    /// batch queues nothing, so an accepted edit never fails a tick. Returns the batch's
+    /// sequence number: the next tick reports it applied (`edits_applied_through`).
+    pub fn queue_edits(&mut self, batch: Vec<Edit>) -> Result<u64, SceneError> {
         let received = batch.len();
         self.pending = edits::queue(&self.scene, &self.pending, batch)?;
         self.pending_received += received;
-        Ok(())
+        self.accepted_batches += 1;
+        Ok(self.accepted_batches)
     }
 
     /// Distinct targets with a queued edit.
@@ -180,6 +185,7 @@ impl Session {
             edits_received: delta.received,
             edits_coalesced: delta.coalesced,
             edits_unchanged: delta.unchanged,
+            edits_applied_through: self.accepted_batches,
             moved_surfaces: delta.moved.len(),
             spp: self.film.passes,
             paths_per_pixel: self.film.mean_paths_per_pixel(),

@@ -26,6 +26,9 @@ pub struct TickStats {
     pub edits_coalesced: usize,
     /// Edits (after coalescing) whose result equalled the current value, so changed nothing.
     pub edits_unchanged: usize,
+    /// Every edit batch with a sequence number up to this one is applied (or coalesced into a
+    /// later edit of the same target that is); 0 before any batch.
+    pub edits_applied_through: u64,
     /// Objects and light shapes whose Embree instance was updated.
     pub moved_surfaces: usize,
     /// Render passes accumulated since the last reset.

@@ -78,6 +78,9 @@ pub struct EditsAccepted {
     /// Targets with an edit waiting for the next tick, this batch included (edits are
     /// coalesced, latest per target, as they are queued).
     pub pending: usize,
+    /// The batch's sequence number in its session (1, 2, ...): it is applied by the first tick
+    /// whose `edits_applied_through` reaches it.
+    pub seq: u64,
 }
 
 /// `POST /v1/sessions/{id}/tick`.
@@ -164,7 +167,7 @@ fn unit_speed() -> f32 {
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum ServerMessage {
     Stats { stats: Box<TickStats>, frames_dropped: u64 },
-    EditsAccepted { queued: usize, pending: usize },
+    EditsAccepted { queued: usize, pending: usize, seq: u64 },
     Error { error: String, detail: String },
 }
 

@@ -101,8 +101,8 @@ impl Worker {
             return Err(failed(&reason));
         }
         let queued = batch.len();
-        self.session.queue_edits(batch)?;
-        Ok(EditsAccepted { queued, pending: self.session.pending_edits() })
+        let seq = self.session.queue_edits(batch)?;
+        Ok(EditsAccepted { queued, pending: self.session.pending_edits(), seq })
     }
 
     /// Runs one tick, catching panics; on success publishes the frame.

@@ -171,36 +171,35 @@ async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, by
         Ok(m) => m,
         Err(e) => return Some(error_message(&e)),
     };
-    let outcome: Result<Option<ServerMessage>, ApiError> = match message {
-        ClientMessage::Edits { edits } => {
-            let limit = state.config.limits.max_edits_per_message;
-            if edits.len() > limit {
-                Err(ApiError::too_large(format!(
-                    "edits: {} edits exceed the limit of {limit} per message",
-                    edits.len()
-                )))
-            } else {
-                state.metrics.edits_received.fetch_add(edits.len() as u64, Ordering::Relaxed);
-                entry
-                    .handle
-                    .edits(edits)
-                    .await
-                    .map(|a| Some(ServerMessage::EditsAccepted { queued: a.queued, pending: a.pending }))
+    let outcome: Result<Option<ServerMessage>, ApiError> =
+        match message {
+            ClientMessage::Edits { edits } => {
+                let limit = state.config.limits.max_edits_per_message;
+                if edits.len() > limit {
+                    Err(ApiError::too_large(format!(
+                        "edits: {} edits exceed the limit of {limit} per message",
+                        edits.len()
+                    )))
+                } else {
+                    state.metrics.edits_received.fetch_add(edits.len() as u64, Ordering::Relaxed);
+                    entry.handle.edits(edits).await.map(|a| {
+                        Some(ServerMessage::EditsAccepted { queued: a.queued, pending: a.pending, seq: a.seq })
+                    })
+                }
             }
-        }
-        // The frame and stats arrive through the subscription once the tick publishes.
-        ClientMessage::Tick => entry.handle.tick().await.map(|_| None),
-        ClientMessage::Subscribe { frames, stats, every } => {
-            if every == 0 {
-                Err(ApiError::invalid("every: must be at least 1"))
-            } else {
-                *sub = Subscription { frames, stats, every };
-                Ok(None)
+            // The frame and stats arrive through the subscription once the tick publishes.
+            ClientMessage::Tick => entry.handle.tick().await.map(|_| None),
+            ClientMessage::Subscribe { frames, stats, every } => {
+                if every == 0 {
+                    Err(ApiError::invalid("every: must be at least 1"))
+                } else {
+                    *sub = Subscription { frames, stats, every };
+                    Ok(None)
+                }
             }
-        }
-        ClientMessage::Play { anim, speed } => play(entry, &anim, speed).await.map(|_| None),
-        ClientMessage::Pause => entry.handle.pause().map(|_| None),
-    };
+            ClientMessage::Play { anim, speed } => play(entry, &anim, speed).await.map(|_| None),
+            ClientMessage::Pause => entry.handle.pause().map(|_| None),
+        };
     match outcome {
         Ok(reply) => reply.map(|m| text(&m)),
         Err(e) => Some(error_message(&e)),

@@ -4,7 +4,9 @@
 //! for the given duration. Each period sends the edits for the animation's current time and, if
 //! the session has no tick in flight, a `tick`; edits sent while a tick is busy coalesce on the
 //! server (and are counted as such). At the end every session ticks once more, so every edit sent
-//! is either applied or reported coalesced: `lost_edits` must be 0.
+//! is either applied or reported coalesced: `lost_edits` must be 0. Lost edits are counted from
+//! the server's own numbers: each accepted batch's sequence number (`edits_accepted.seq`)
+//! against the last tick's `edits_applied_through`, plus any batch never acknowledged.
 //!
 //! Latency is measured from sending a period's edits and tick to receiving that tick's frame.
 use super::UsageError;
@@ -64,8 +66,23 @@ pub struct SessionReport {
     pub edits_sent: u64,
     pub edits_received_by_server: u64,
     pub edits_coalesced: u64,
+    /// (sequence number, edits) of each batch the server acknowledged, in order.
+    pub batches_accepted: Vec<(u64, u64)>,
+    /// The highest `edits_applied_through` a tick reported.
+    pub applied_through: u64,
     pub bytes: u64,
     pub errors: Vec<String>,
+}
+
+impl SessionReport {
+    /// Edits the server never applied: those of acknowledged batches past the last applied
+    /// sequence number, and those of batches it never acknowledged.
+    fn lost_edits(&self) -> u64 {
+        let acknowledged: u64 = self.batches_accepted.iter().map(|&(_, n)| n).sum();
+        let unapplied: u64 =
+            self.batches_accepted.iter().filter(|&&(seq, _)| seq > self.applied_through).map(|&(_, n)| n).sum();
+        unapplied + self.edits_sent.saturating_sub(acknowledged)
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -211,7 +228,7 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         edits_sent: sent,
         edits_applied: received - coalesced,
         edits_coalesced: coalesced,
-        lost_edits: sent as i64 - received as i64,
+        lost_edits: reports.iter().map(SessionReport::lost_edits).sum::<u64>() as i64,
         bytes_received: sum(|r| r.bytes),
         errors: errors.len() as u64,
         error_samples: errors.into_iter().take(5).collect(),
@@ -296,9 +313,13 @@ async fn drive(url: String, anim: Animation, hz: f64, duration: Duration, frames
                                 report.frames_dropped = frames_dropped;
                                 report.edits_received_by_server += stats.edits_received as u64;
                                 report.edits_coalesced += stats.edits_coalesced as u64;
+                                report.applied_through = report.applied_through.max(stats.edits_applied_through);
                                 frames == FrameFormat::None
                             }
-                            Ok(ServerMessage::EditsAccepted { .. }) => false,
+                            Ok(ServerMessage::EditsAccepted { queued, seq, .. }) => {
+                                report.batches_accepted.push((seq, queued as u64));
+                                false
+                            }
                             Ok(ServerMessage::Error { error, detail }) => {
                                 report.errors.push(format!("{error}: {detail}"));
                                 false
