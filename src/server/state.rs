@@ -120,8 +120,6 @@ pub struct SessionEntry {
     pub height: u32,
     pub seed: u64,
     pub tick_hz: Option<f32>,
-    /// Its estimated resident memory.
-    pub memory_bytes: u64,
     /// Milliseconds after the server's start of the last request or WebSocket message.
     last_active: AtomicU64,
     pub handle: SessionHandle,
@@ -381,7 +379,6 @@ impl AppState {
             height: h,
             seed: req.seed,
             tick_hz: req.tick_hz,
-            memory_bytes,
             last_active: AtomicU64::new(self.now_ms()),
             handle,
             _reservation: reservation,
