@@ -6,12 +6,14 @@ COPY scripts/packages.txt scripts/packages.txt
 RUN apt-get update && grep -v '^\s*#' scripts/packages.txt | grep -v '^\s*$' \
     | xargs apt-get install -y --no-install-recommends && rm -rf /var/lib/apt/lists/*
 COPY . .
-RUN cargo build --release --locked
+RUN scripts/oidn.sh && cargo build --release --locked
 
 FROM debian:bookworm-slim
 RUN apt-get update && apt-get install -y --no-install-recommends libembree3-3 libfontconfig1 fonts-dejavu-core ca-certificates \
     && rm -rf /var/lib/apt/lists/*
 COPY --from=build /src/target/release/relume /usr/local/bin/relume
+# Open Image Denoise: the binary's rpath includes $ORIGIN/../lib/relume.
+COPY --from=build /src/.deps/oidn/lib /usr/local/lib/relume
 COPY --from=build /src/scenes /usr/share/relume/scenes
 WORKDIR /usr/share/relume
 ENTRYPOINT ["relume"]

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs what relume needs on Debian bookworm, only what is missing: the packages listed in the
-# given files (default scripts/packages.txt, which the Dockerfile shares) and a Rust toolchain
-# if cargo is absent.
+# given files (default scripts/packages.txt, which the Dockerfile shares), a Rust toolchain
+# if cargo is absent, and Intel's Open Image Denoise in .deps/oidn (scripts/oidn.sh).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 lists=("$@")
@@ -23,3 +23,4 @@ if ! command -v cargo >/dev/null 2>&1 && [ ! -x "$HOME/.cargo/bin/cargo" ]; then
   echo "setup: installing the Rust toolchain (rustup)" >&2
   curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal
 fi
+"$here/oidn.sh"

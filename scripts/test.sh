@@ -11,3 +11,8 @@ cargo build --release --locked
 # Which of Embree's kernel families this CPU runs, and which it skips.
 cargo test --release --locked --test embree_isa -- --nocapture 2>&1 | grep -E "Embree's|test result"
 cargo test --release --locked --no-fail-fast "$@"
+# A build without the `denoise` feature still builds, serves, and refuses denoising by name.
+# That build replaces target/release/relume, so the full binary is put back after it (cargo
+# keeps both builds, so this only relinks).
+cargo test --release --locked --no-default-features --test denoise_server
+cargo build --release --locked

@@ -67,6 +67,38 @@ fn render_anim_writes_every_frame() {
     }
 }
 
+/// `--denoise` writes the denoised still, which differs from the raw one of the same seed.
+#[cfg(feature = "denoise")]
+#[test]
+fn render_denoise_writes_the_denoised_still() {
+    let dir = out_dir("denoise");
+    let render = |extra: &[&str], name: &str| {
+        let out = dir.join(name);
+        let o = relume()
+            .args([
+                "render",
+                scene("cornell-box.json").to_str().unwrap(),
+                "--spp",
+                "1",
+                "--width",
+                "32",
+                "--height",
+                "32",
+            ])
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (std::fs::read(&out).unwrap(), String::from_utf8_lossy(&o.stderr).to_string())
+    };
+    let (raw, _) = render(&[], "raw.exr");
+    let (denoised, log) = render(&["--denoise=fast"], "denoised.exr");
+    assert!(log.contains("denoised (fast)"), "{log}");
+    assert_ne!(raw, denoised, "--denoise wrote the raw image");
+}
+
 #[test]
 fn bad_input_exits_2_with_a_message() {
     let dir = out_dir("bad");
@@ -110,6 +142,16 @@ fn bad_input_exits_2_with_a_message() {
                 dir.join("x.png").display().to_string(),
             ],
             "nope.json",
+        ),
+        (
+            vec![
+                "render".into(),
+                scene("cornell-box.json").display().to_string(),
+                "--denoise=ultra".into(),
+                "--out".into(),
+                dir.join("x.png").display().to_string(),
+            ],
+            "--denoise: unknown quality 'ultra'",
         ),
     ];
     for (args, words) in cases {

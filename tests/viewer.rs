@@ -89,7 +89,8 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
     )
     .await;
     c.execute(
-        "document.getElementById('scene').value = 'bunnies-1'; document.getElementById('size').value = '128';",
+        "document.getElementById('scene').value = 'bunnies-1'; document.getElementById('size').value = '128'; \
+         document.getElementById('denoise').value = 'fast';",
         vec![],
     )
     .await
@@ -121,6 +122,9 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
     // The session's scene (not a frame of another tick, whose noise differs anyway) shows the
     // bunny somewhere else than the bundled scene puts it.
     let id = after[0].as_str().expect("the viewer's session id");
+    let view: Value =
+        server.http.get(server.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(view["denoise"]["quality"], "fast", "the viewer's denoise choice did not reach the session");
     let scene: Value =
         server.http.get(server.url(&format!("/v1/sessions/{id}/scene"))).send().await.unwrap().json().await.unwrap();
     let bundled: Value =

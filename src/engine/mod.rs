@@ -10,15 +10,20 @@
 //!    when anything changed, unless the technique restarts only the pixels the change touched.
 //! 5. **Render** on rayon.
 //! 6. **Resolve** the film into a linear image; encoding happens where the frame is consumed.
+//! 7. **Denoise**, when the session asks for it ([`Session::enable_denoise`]): OIDN on the
+//!    resolved image, guided by auxiliary images ([`DenoiseStage`]); the raw image stays in the
+//!    frame beside the denoised one.
 //!
 //! Nothing traces while Embree commits: the phases run in order inside one session. The engine
 //! never touches tokio or axum; callers run `tick` on a rayon pool made by [`thread_pool`].
+mod denoise;
 mod stats;
 
+pub use denoise::DenoiseStage;
 pub use stats::{PhaseTimes, TickStats};
 
 use crate::embree::{self, Device, EmbreeError};
-use crate::film::{bilateral_filter, Film, LinearImage};
+use crate::film::{bilateral_filter, DenoiseError, DenoiseSettings, Film, LinearImage};
 use crate::scene::edits::{self, Edit, SceneDelta};
 use crate::scene::{Scene, SceneAccel, SceneError};
 use crate::technique::{self, RenderContext, Technique, TechniqueConfig, TechniqueError};
@@ -33,6 +38,8 @@ pub enum EngineError {
     Embree(#[from] EmbreeError),
     #[error(transparent)]
     Technique(#[from] TechniqueError),
+    #[error(transparent)]
+    Denoise(#[from] DenoiseError),
     #[error("thread pool: {0}")]
     ThreadPool(String),
 }
@@ -44,8 +51,21 @@ pub struct Frame {
     pub accumulation_id: u64,
     /// Render passes accumulated since the last reset.
     pub spp: u32,
+    /// The raw resolved image.
     pub image: LinearImage,
+    /// The denoised image, when the session denoises.
+    pub denoised: Option<LinearImage>,
     pub stats: TickStats,
+}
+
+impl Frame {
+    /// The image a client sees: the denoised one when there is one, unless `raw` is asked for.
+    pub fn shown(&self, raw: bool) -> &LinearImage {
+        match &self.denoised {
+            Some(d) if !raw => d,
+            _ => &self.image,
+        }
+    }
 }
 
 /// A rayon pool whose workers flush denormals to zero, as Embree asks.
@@ -74,6 +94,7 @@ pub struct Session {
     pending_received: usize,
     /// Sequence number of the last accepted edit batch (the first is 1).
     accepted_batches: u64,
+    denoise: Option<DenoiseStage>,
 }
 
 impl Session {
@@ -92,7 +113,26 @@ impl Session {
             pending: Vec::new(),
             pending_received: 0,
             accepted_batches: 0,
+            denoise: None,
         })
+    }
+
+    /// Denoises every frame from the next tick on (OIDN's device and filter are made now, once).
+    pub fn enable_denoise(&mut self, settings: DenoiseSettings) -> Result<(), EngineError> {
+        self.denoise = Some(DenoiseStage::new(settings, self.film.width, self.film.height)?);
+        Ok(())
+    }
+
+    /// `image` (a frame of this session) denoised once with `settings`, its auxiliary images
+    /// traced to convergence first: for a still, where denoising every tick would be wasted.
+    pub fn denoise_once(&self, settings: DenoiseSettings, image: &LinearImage) -> Result<LinearImage, EngineError> {
+        let mut stage = DenoiseStage::new(settings, self.film.width, self.film.height)?;
+        Ok(stage.finish(&self.scene, &self.accel, self.seed, image)?.0)
+    }
+
+    /// The denoise stage, when the session denoises.
+    pub fn denoise(&self) -> Option<&DenoiseStage> {
+        self.denoise.as_ref()
     }
 
     pub fn scene(&self) -> &Scene {
@@ -134,7 +174,7 @@ impl Session {
         self.pending.len()
     }
 
-    /// Runs one tick: drain → apply → commit → update → render → resolve.
+    /// Runs one tick: drain → apply → commit → update → render → resolve → denoise.
     pub fn tick(&mut self) -> Result<Frame, EngineError> {
         let start = Instant::now();
         let mut times = PhaseTimes::default();
@@ -163,6 +203,9 @@ impl Session {
         if self.technique.restarts_whole_film(&delta) {
             self.film.reset();
         }
+        if let Some(stage) = &mut self.denoise {
+            stage.update(&delta);
+        }
         times.update_ms = ms(t);
 
         let t = Instant::now();
@@ -175,6 +218,17 @@ impl Session {
             image = bilateral_filter(&image, f.sigma_spatial_px, f.sigma_range);
         }
         times.resolve_ms = ms(t);
+
+        // Denoise, keeping the raw image.
+        let t = Instant::now();
+        let (denoised, aux_rays) = match &mut self.denoise {
+            Some(stage) => {
+                let (d, work) = stage.run(&self.scene, &self.accel, self.seed, &image)?;
+                (Some(d), work.rays)
+            }
+            None => (None, 0),
+        };
+        times.denoise_ms = if self.denoise.is_some() { ms(t) } else { 0.0 };
         times.total_ms = ms(start);
 
         let stats = TickStats {
@@ -190,10 +244,17 @@ impl Session {
             spp: self.film.passes,
             paths_per_pixel: self.film.mean_paths_per_pixel(),
             accumulation_id: self.film.accumulation_id,
+            aux_rays,
             detail: render.detail,
         };
-        let frame =
-            Frame { tick: self.tick, accumulation_id: self.film.accumulation_id, spp: self.film.passes, image, stats };
+        let frame = Frame {
+            tick: self.tick,
+            accumulation_id: self.film.accumulation_id,
+            spp: self.film.passes,
+            image,
+            denoised,
+            stats,
+        };
         self.tick += 1;
         Ok(frame)
     }

@@ -11,6 +11,9 @@ pub struct PhaseTimes {
     pub update_ms: f64,
     pub render_ms: f64,
     pub resolve_ms: f64,
+    /// The denoise stage (auxiliary pass and OIDN), 0 when the session does not denoise.
+    #[serde(default)]
+    pub denoise_ms: f64,
     pub total_ms: f64,
 }
 
@@ -36,5 +39,9 @@ pub struct TickStats {
     /// Mean number of estimates (paths) per pixel since the last reset.
     pub paths_per_pixel: f64,
     pub accumulation_id: u64,
+    /// Rays the denoise stage's auxiliary pass traced (0 once its images are converged, and
+    /// when the session does not denoise).
+    #[serde(default)]
+    pub aux_rays: u64,
     pub detail: TechniqueStats,
 }

@@ -2,6 +2,7 @@
 //! in `proto/openapi.yaml` and `proto/ws.schema.json`. Shared by the server, the load client
 //! and the tests, so there is one definition of each message.
 use crate::engine::TickStats;
+use crate::film::DenoiseSettings;
 use crate::scene::edits::Edit;
 use crate::technique::TechniqueConfig;
 use serde::{Deserialize, Serialize};
@@ -30,6 +31,9 @@ pub struct CreateSession {
     /// Server-driven ticks per second; `None` for client-driven ticks only.
     #[serde(default)]
     pub tick_hz: Option<f32>,
+    /// Denoise every frame with Open Image Denoise (absent: off).
+    #[serde(default)]
+    pub denoise: Option<DenoiseSettings>,
 }
 
 fn default_seed() -> u64 {
@@ -56,6 +60,7 @@ pub struct SessionView {
     pub height: u32,
     pub seed: u64,
     pub tick_hz: Option<f32>,
+    pub denoise: Option<DenoiseSettings>,
     pub ticks: u64,
     /// `running` or `failed`.
     pub state: String,
@@ -139,6 +144,9 @@ pub enum ClientMessage {
         stats: bool,
         #[serde(default = "one")]
         every: u32,
+        /// Frames are the denoised image when the session denoises; `false` sends the raw one.
+        #[serde(default = "yes")]
+        denoised: bool,
     },
     /// The server drives the named animation itself (a file `NAME.anim.json` next to the scene).
     Play {

@@ -154,6 +154,9 @@ pub struct FrameQuery {
     pub tick: Option<u64>,
     #[serde(default)]
     pub exposure: Option<f32>,
+    /// `false` for the raw image of a denoising session (default: denoised when it denoises).
+    #[serde(default)]
+    pub denoised: Option<bool>,
 }
 
 pub async fn get_frame(
@@ -208,10 +211,11 @@ pub async fn get_frame(
         }
     };
     let image = frame.clone();
+    let raw = q.denoised == Some(false);
     let metrics = s.metrics.clone();
     let bytes = tokio::task::spawn_blocking(move || {
         let t = std::time::Instant::now();
-        let bytes = encode(&image.image, format, exposure);
+        let bytes = encode(image.shown(raw), format, exposure);
         metrics.observe_encode(t.elapsed().as_secs_f64());
         bytes
     })

@@ -5,6 +5,7 @@ use super::protocol::{CreateSession, SceneEntry, SessionLinks, SessionView};
 use super::worker::SessionHandle;
 use crate::embree::Device;
 use crate::engine::Session;
+use crate::film::{DenoiseError, DenoiseSettings};
 use crate::scene::{Scene, SceneBudget, SceneError};
 use crate::technique::{path::PathConfig, TechniqueConfig, TechniqueError};
 use axum::http::StatusCode;
@@ -52,6 +53,17 @@ impl Limits {
             max_objects: self.max_objects,
             max_lights: self.max_lights,
         }
+    }
+}
+
+/// The denoiser could not start: 422 when this build lacks it, 503 when OIDN is missing.
+fn denoise_error(e: crate::engine::EngineError) -> ApiError {
+    match e {
+        crate::engine::EngineError::Denoise(d @ DenoiseError::NotBuilt) => ApiError::invalid(d.to_string()),
+        crate::engine::EngineError::Denoise(d @ DenoiseError::Unavailable(_)) => {
+            ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "denoise_unavailable", d.to_string())
+        }
+        other => ApiError::internal(other.to_string()),
     }
 }
 
@@ -120,6 +132,7 @@ pub struct SessionEntry {
     pub height: u32,
     pub seed: u64,
     pub tick_hz: Option<f32>,
+    pub denoise: Option<DenoiseSettings>,
     /// Milliseconds after the server's start of the last request or WebSocket message.
     last_active: AtomicU64,
     pub handle: SessionHandle,
@@ -350,9 +363,9 @@ impl AppState {
             }
         }
 
-        let memory_bytes = self.check_memory(&technique, &scene, u64::from(w) * u64::from(h))?;
+        let memory_bytes = self.check_memory(&technique, req.denoise, &scene, u64::from(w) * u64::from(h))?;
         reservation.add_bytes(memory_bytes, limits.server_memory)?;
-        let session = Session::new(scene, &technique, req.seed, &self.device).map_err(|e| match e {
+        let mut session = Session::new(scene, &technique, req.seed, &self.device).map_err(|e| match e {
             crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
                 ApiError::invalid(format!("technique: {t}"))
             }
@@ -362,6 +375,9 @@ impl AppState {
             crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("scene: {s}")),
             other => ApiError::internal(other.to_string()),
         })?;
+        if let Some(settings) = req.denoise {
+            session.enable_denoise(settings).map_err(denoise_error)?;
+        }
         let n = self.next_id.fetch_add(1, Ordering::Relaxed);
         let salt = std::time::SystemTime::now()
             .duration_since(std::time::UNIX_EPOCH)
@@ -379,6 +395,7 @@ impl AppState {
             height: h,
             seed: req.seed,
             tick_hz: req.tick_hz,
+            denoise: req.denoise,
             last_active: AtomicU64::new(self.now_ms()),
             handle,
             _reservation: reservation,
@@ -408,13 +425,28 @@ impl AppState {
 
     /// The session's estimated resident bytes (technique and film), refused with 413 naming
     /// the technique's sizing field when over `session_memory`.
-    fn check_memory(&self, technique: &TechniqueConfig, scene: &Scene, pixels: u64) -> Result<u64, ApiError> {
+    fn check_memory(
+        &self,
+        technique: &TechniqueConfig,
+        denoise: Option<DenoiseSettings>,
+        scene: &Scene,
+        pixels: u64,
+    ) -> Result<u64, ApiError> {
         let limit = self.config.limits.session_memory;
         let estimate = technique.resident_estimate(scene, pixels).map_err(|e| match e {
             TechniqueError::TooLarge { .. } => ApiError::too_large(format!("technique.{e}")),
             other => ApiError::invalid(format!("technique: {other}")),
         })?;
-        let bytes = estimate.bytes.saturating_add(pixels * crate::film::Film::BYTES_PER_PIXEL);
+        let film = pixels * crate::film::Film::BYTES_PER_PIXEL;
+        let denoiser = denoise.map_or(0, |d| d.resident_estimate(pixels));
+        let bytes = estimate.bytes.saturating_add(film).saturating_add(denoiser);
+        if bytes > limit && denoiser > 0 && estimate.bytes.saturating_add(film) <= limit {
+            return Err(ApiError::too_large(format!(
+                "denoise: the session would hold about {} MiB with its denoiser, above the {} MiB a session may hold (--session-memory)",
+                bytes >> 20,
+                limit >> 20
+            )));
+        }
         if bytes > limit {
             return Err(ApiError::too_large(format!(
                 "technique.{}: the session would hold about {} MiB, above the {} MiB a session may hold (--session-memory)",
@@ -469,6 +501,7 @@ pub fn view(e: &SessionEntry) -> SessionView {
         height: e.height,
         seed: e.seed,
         tick_hz: e.tick_hz,
+        denoise: e.denoise,
         ticks: last_stats.as_ref().map_or(0, |s| s.tick + 1),
         state: if failure.is_some() { "failed".into() } else { "running".into() },
         failure,

@@ -10,7 +10,6 @@ use super::error::ApiError;
 use super::metrics::Metrics;
 use super::protocol::EditsAccepted;
 use crate::engine::{Session, TickStats};
-use crate::film::LinearImage;
 use crate::scene::animation::Animation;
 use crate::scene::edits::Edit;
 use axum::http::StatusCode;
@@ -30,15 +29,9 @@ const MAX_PERIOD: Duration = Duration::from_secs(100);
 /// Tick rate while an animation plays in a session without `tick_hz`.
 pub const DEFAULT_PLAY_HZ: f32 = 30.0;
 
-/// The newest frame of a session, as published after a tick.
-#[derive(Debug)]
-pub struct PublishedFrame {
-    pub tick: u64,
-    pub accumulation_id: u64,
-    pub spp: u32,
-    pub image: LinearImage,
-    pub stats: TickStats,
-}
+/// The newest frame of a session, as published after a tick (raw and, when the session
+/// denoises, denoised).
+pub type PublishedFrame = crate::engine::Frame;
 
 pub enum Command {
     Edits {
@@ -125,14 +118,7 @@ impl Worker {
                     }
                     h.push_back(stats.clone());
                 }
-                let published = PublishedFrame {
-                    tick: frame.tick,
-                    accumulation_id: frame.accumulation_id,
-                    spp: frame.spp,
-                    image: frame.image,
-                    stats: frame.stats,
-                };
-                self.publish.send_replace(Some(Arc::new(published)));
+                self.publish.send_replace(Some(Arc::new(frame)));
                 return Ok(stats);
             }
             Ok(Err(e)) => format!("tick failed: {e}"),

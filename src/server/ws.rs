@@ -68,6 +68,8 @@ struct Subscription {
     frames: FrameFormat,
     stats: bool,
     every: u32,
+    /// Send the denoised image when the session denoises (else the raw one).
+    denoised: bool,
 }
 
 fn error_message(e: &ApiError) -> Message {
@@ -82,7 +84,7 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
     let mut frames = entry.handle.frames.clone();
     frames.mark_unchanged();
     let mut closing = state.shutting_down.subscribe();
-    let mut sub = Subscription { frames: FrameFormat::Png, stats: true, every: 1 };
+    let mut sub = Subscription { frames: FrameFormat::Png, stats: true, every: 1, denoised: true };
     let mut last_seen: Option<u64> = None;
     let mut dropped = 0u64;
     let mut ping = tokio::time::interval_at(tokio::time::Instant::now() + PING_EVERY, PING_EVERY);
@@ -141,10 +143,11 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
                 };
                 let header = FrameHeader { tick: frame.tick, accumulation_id: frame.accumulation_id, format: sub.frames, width: frame.image.width, height: frame.image.height };
                 let image = frame.clone();
+                let raw = !sub.denoised;
                 let metrics = state.metrics.clone();
                 let encoded = tokio::task::spawn_blocking(move || {
                     let t = std::time::Instant::now();
-                    let bytes = encode(&image.image, format, 0.0);
+                    let bytes = encode(image.shown(raw), format, 0.0);
                     metrics.observe_encode(t.elapsed().as_secs_f64());
                     bytes
                 });
@@ -189,11 +192,11 @@ async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, by
             }
             // The frame and stats arrive through the subscription once the tick publishes.
             ClientMessage::Tick => entry.handle.tick().await.map(|_| None),
-            ClientMessage::Subscribe { frames, stats, every } => {
+            ClientMessage::Subscribe { frames, stats, every, denoised } => {
                 if every == 0 {
                     Err(ApiError::invalid("every: must be at least 1"))
                 } else {
-                    *sub = Subscription { frames, stats, every };
+                    *sub = Subscription { frames, stats, every, denoised };
                     Ok(None)
                 }
             }

@@ -262,7 +262,7 @@ async fn drive(url: String, anim: Animation, hz: f64, duration: Duration, frames
         }
     };
     let text = |m: &ClientMessage| Message::Text(serde_json::to_string(m).unwrap_or_default().into());
-    if ws.send(text(&ClientMessage::Subscribe { frames, stats: true, every: 1 })).await.is_err() {
+    if ws.send(text(&ClientMessage::Subscribe { frames, stats: true, every: 1, denoised: true })).await.is_err() {
         report.errors.push("websocket closed before streaming".into());
         return report;
     }

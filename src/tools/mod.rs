@@ -44,6 +44,18 @@ impl SceneArgs {
     }
 }
 
+/// The settings for `--denoise[=QUALITY]` (`None` when the flag is absent; aux images on).
+pub fn denoise_settings(flag: Option<&str>) -> Result<Option<crate::film::DenoiseSettings>, UsageError> {
+    use crate::film::{DenoiseQuality, DenoiseSettings};
+    flag.map(|q| {
+        let quality = DenoiseQuality::parse(q).ok_or_else(|| {
+            UsageError(format!("--denoise: unknown quality '{q}' (use {})", DenoiseQuality::NAMES.join(", ")))
+        })?;
+        Ok(DenoiseSettings { quality, aux: true })
+    })
+    .transpose()
+}
+
 /// Writes a report as pretty JSON when the command was given `--json FILE`.
 pub fn write_json_report<T: serde::Serialize>(path: Option<&Path>, report: &T) -> anyhow::Result<()> {
     use anyhow::Context;

@@ -1,6 +1,6 @@
 //! `relume render`: a still image, or an animation rendered through the same session and tick
 //! path the service uses.
-use super::{scenes_root_for, SceneArgs, UsageError};
+use super::{denoise_settings, scenes_root_for, SceneArgs, UsageError};
 use crate::embree::Device;
 use crate::engine::{thread_pool, Frame, Session};
 use crate::film::{write_image, ImageFormat};
@@ -38,6 +38,10 @@ pub struct RenderArgs {
     /// Image format of animation frames.
     #[arg(long, default_value = "png")]
     pub format: String,
+    /// Denoise the output with Open Image Denoise: `--denoise` (quality high), or
+    /// `--denoise=fast|balanced|high`. A still is denoised once, at the end.
+    #[arg(long, value_name = "QUALITY", num_args = 0..=1, require_equals = true, default_missing_value = "high")]
+    pub denoise: Option<String>,
 }
 
 /// The technique configuration for a CLI technique spec (`ID[:VARIANT][@VALUE][:KEY=VALUE]...`,
@@ -117,8 +121,18 @@ fn render_still(args: &RenderArgs) -> Result<()> {
     })?;
     bar.finish_and_clear();
     let secs = started.elapsed().as_secs_f64();
-    write_image(&frame.image, &args.out, args.exposure)?;
-    let mean = frame.image.mean();
+    let image = match denoise_settings(args.denoise.as_deref())? {
+        Some(settings) => {
+            let t = std::time::Instant::now();
+            let (s, raw) = (&mut session, &frame.image);
+            let denoised = pool.install(move || s.denoise_once(settings, raw))?;
+            eprintln!("denoised ({}) in {:.0} ms", settings.quality.name(), t.elapsed().as_secs_f64() * 1e3);
+            denoised
+        }
+        None => frame.image.clone(),
+    };
+    write_image(&image, &args.out, args.exposure)?;
+    let mean = image.mean();
     eprintln!(
         "wrote {} ({format:?}): {} spp in {secs:.2} s ({:.1} spp/s), {:.1} Mrays/s, mean radiance [{:.4}, {:.4}, {:.4}], \
          resident technique memory {:.1} MiB",
@@ -142,6 +156,9 @@ fn render_animation(args: &RenderArgs, anim_path: &std::path::Path) -> Result<()
     }
     let anim = Animation::load(anim_path).map_err(|e| UsageError(format!("{}: {e}", anim_path.display())))?;
     let (mut session, pool, _device) = make_session(args, args.spp)?;
+    if let Some(settings) = denoise_settings(args.denoise.as_deref())? {
+        session.enable_denoise(settings)?;
+    }
     anim.validate(session.scene()).map_err(|e| UsageError(format!("{}: {e}", anim_path.display())))?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let bar = bar(args.frames as u64, "frames", format!("{} x {} spp", args.technique, args.spp))?;
@@ -158,7 +175,7 @@ fn render_animation(args: &RenderArgs, anim_path: &std::path::Path) -> Result<()
             let frame = session.tick()?;
             total_ms += frame.stats.times.total_ms;
             let file = args.out.join(format!("frame-{i:04}.{ext}"));
-            write_image(&frame.image, &file, args.exposure)?;
+            write_image(frame.shown(false), &file, args.exposure)?;
             bar.inc(1);
         }
         Ok(())

@@ -80,7 +80,7 @@ function showStats(s, dropped) {
     ["frames dropped", dropped],
   ];
   $("stats").tBodies[0].innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
-  const stages = ["apply_ms", "commit_ms", "update_ms", "render_ms", "resolve_ms"];
+  const stages = ["apply_ms", "commit_ms", "update_ms", "render_ms", "resolve_ms", "denoise_ms"];
   const total = Math.max(s.times.total_ms, 1e-6);
   $("stages").innerHTML = stages
     .map((k) => `<div class="bar" style="width:${Math.max(1, (100 * s.times[k]) / total)}%">${k.replace("_ms", "")} ${s.times[k].toFixed(2)} ms</div>`)
@@ -119,6 +119,7 @@ async function start() {
     technique: { id: $("technique").value, spp: Number($("spp").value) },
     width: size, height: size, tick_hz: Number($("hz").value),
   };
+  if ($("denoise").value) body.denoise = { quality: $("denoise").value };
   status("starting…");
   try {
     const s = await api("/v1/sessions", { method: "POST", body: JSON.stringify(body) });
@@ -137,11 +138,18 @@ async function start() {
   }
 }
 
+// Denoising sessions send their denoised frames unless "raw" is ticked.
+function subscribe() {
+  if (state.ws && state.ws.readyState === WebSocket.OPEN) {
+    state.ws.send(JSON.stringify({ type: "subscribe", frames: "png", stats: true, every: 1, denoised: !$("raw").checked }));
+  }
+}
+
 function connect(id) {
   const proto = location.protocol === "https:" ? "wss" : "ws";
   const ws = new WebSocket(`${proto}://${location.host}/v1/sessions/${id}/ws${token ? "?token=" + encodeURIComponent(token) : ""}`);
   ws.binaryType = "arraybuffer";
-  ws.onopen = () => ws.send(JSON.stringify({ type: "subscribe", frames: "png", stats: true, every: 1 }));
+  ws.onopen = subscribe;
   ws.onmessage = (m) => {
     if (typeof m.data !== "string") return showFrame(m.data);
     const msg = JSON.parse(m.data);
@@ -176,6 +184,7 @@ function installDrag() {
 }
 
 $("start").addEventListener("click", start);
+$("raw").addEventListener("change", subscribe);
 // Leaving the page deletes its session rather than leaving it to the server's idle expiry.
 window.addEventListener("pagehide", () => {
   if (state.id) api(`/v1/sessions/${state.id}`, { method: "DELETE", keepalive: true }).catch(() => {});

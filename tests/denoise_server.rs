@@ -1,0 +1,102 @@
+//! The denoise stage through the service: sessions that ask for it serve the denoised frame by
+//! default and the raw one with `?denoised=false` (HTTP) or `"denoised": false` (WebSocket),
+//! and the raw one is the frame of a twin session that does not denoise.
+mod common;
+use common::server::TestServer;
+use common::ws::{next, send};
+use relume::server::protocol::FRAME_HEADER_LEN;
+use relume::server::Limits;
+use serde_json::{json, Value};
+use tokio_tungstenite::tungstenite::Message;
+
+fn body(denoise: Option<Value>) -> Value {
+    let mut b = json!({"scene": "cornell-box", "width": 48, "height": 48, "seed": 5,
+                       "technique": {"id": "path", "spp": 1}});
+    if let Some(d) = denoise {
+        b["denoise"] = d;
+    }
+    b
+}
+
+async fn tick(s: &TestServer, id: &str) {
+    let r = s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+}
+
+async fn exr(s: &TestServer, id: &str, query: &str) -> Vec<u8> {
+    let r = s.http.get(s.url(&format!("/v1/sessions/{id}/frame.exr?tick=0{query}"))).send().await.unwrap();
+    assert_eq!(r.status(), 200, "{query}");
+    r.bytes().await.unwrap().to_vec()
+}
+
+/// The next binary frame's encoded image.
+async fn ws_frame(ws: &mut common::ws::Socket) -> Vec<u8> {
+    loop {
+        if let Message::Binary(b) = next(ws).await {
+            return b[FRAME_HEADER_LEN..].to_vec();
+        }
+    }
+}
+
+#[cfg(feature = "denoise")]
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn denoised_and_raw_frames_over_http_and_websocket() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(body(Some(json!({"quality": "fast"})))).await;
+    let twin = s.session(body(None)).await;
+    let view: Value = s.http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(view["denoise"], json!({"quality": "fast", "aux": true}));
+
+    // Two sockets on the denoising session: one asks for raw frames, one for the default.
+    let ws_url = s.ws_url(&format!("/v1/sessions/{id}/ws"));
+    let (mut raw_ws, mut den_ws) = (common::ws::open(&ws_url).await, common::ws::open(&ws_url).await);
+    send(&mut raw_ws, json!({"type": "subscribe", "frames": "exr", "stats": false, "denoised": false})).await;
+    send(&mut den_ws, json!({"type": "subscribe", "frames": "exr", "stats": false})).await;
+    // The subscriptions are in place once a message sent after them is answered.
+    for ws in [&mut raw_ws, &mut den_ws] {
+        send(ws, json!({"type": "no-such-message"})).await;
+        assert!(matches!(next(ws).await, Message::Text(_)), "an error reply");
+    }
+    tick(&s, &id).await;
+    tick(&s, &twin).await;
+
+    let denoised = exr(&s, &id, "").await;
+    let raw = exr(&s, &id, "&denoised=false").await;
+    let twin_frame = exr(&s, &twin, "").await;
+    assert_eq!(raw, twin_frame, "the raw frame differs from a twin session without denoising");
+    assert_ne!(denoised, raw, "the default frame of a denoising session is the raw one");
+    assert_eq!(exr(&s, &twin, "&denoised=true").await, twin_frame, "a session without denoising has one image");
+
+    let (ws_raw, ws_den) = (ws_frame(&mut raw_ws).await, ws_frame(&mut den_ws).await);
+    assert_eq!(ws_raw, raw, "WebSocket raw frame");
+    assert_eq!(ws_den, denoised, "WebSocket denoised frame");
+    let stats: Value =
+        s.http.get(s.url(&format!("/v1/sessions/{id}/stats"))).send().await.unwrap().json().await.unwrap();
+    assert!(stats["stats"][0]["times"]["denoise_ms"].as_f64().unwrap() > 0.0, "{stats}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_denoise_settings_are_refused_naming_the_field() {
+    let s = TestServer::start(None, Limits::default()).await;
+    for (bad, names) in [
+        (json!({"quality": "ultra"}), "denoise"),
+        (json!({"aux": "yes"}), "denoise"),
+        (json!({"quality": "fast", "strength": 2}), "denoise"),
+        (json!("high"), "denoise"),
+    ] {
+        let r = s.http.post(s.url("/v1/sessions")).json(&body(Some(bad.clone()))).send().await.unwrap();
+        assert_eq!(r.status(), 422, "{bad}");
+        let e: Value = r.json().await.unwrap();
+        assert!(e["detail"].as_str().unwrap().contains(names), "{bad}: {e}");
+    }
+}
+
+#[cfg(not(feature = "denoise"))]
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_build_without_the_feature_refuses_denoise_naming_it() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let r = s.http.post(s.url("/v1/sessions")).json(&body(Some(json!({"quality": "fast"})))).send().await.unwrap();
+    assert_eq!(r.status(), 422);
+    let e: Value = r.json().await.unwrap();
+    assert!(e["detail"].as_str().unwrap().contains("`denoise` cargo feature"), "{e}");
+}
