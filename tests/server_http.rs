@@ -227,3 +227,64 @@ async fn bad_inputs_get_their_4xx_and_harm_nothing() {
     assert!(m.contains("relume_rejected_requests_total{reason=\"invalid\"}"));
     s.shutdown().await.unwrap();
 }
+
+/// Every client asking for the same frame shares one encoding: repeated GETs and WebSocket
+/// subscribers of the same tick and format encode once, and a client holding the bytes gets 304
+/// for its ETag. The count would rise with every request if each one encoded.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn frames_are_encoded_once_per_tick_and_format_and_revalidate_by_etag() {
+    use common::ws::{next, send};
+    use std::sync::atomic::Ordering;
+    use tokio_tungstenite::tungstenite::Message;
+    let s = TestServer::start(None, Limits::default()).await;
+    let encoded = || s.state.metrics.frames_encoded.load(Ordering::Relaxed);
+    let id = s.session(small("cornell-box")).await;
+    s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
+    let get = |path: String, etag: Option<String>| {
+        let mut r = s.http.get(s.url(&path));
+        if let Some(e) = etag {
+            r = r.header("if-none-match", e);
+        }
+        r.send()
+    };
+    let png = format!("/v1/sessions/{id}/frame.png?tick=0");
+    let first = get(png.clone(), None).await.unwrap();
+    assert_eq!(first.status(), 200);
+    let etag = first.headers()["etag"].to_str().unwrap().to_string();
+    let bytes = first.bytes().await.unwrap();
+    let after_first = encoded();
+    let again = get(png.clone(), None).await.unwrap();
+    assert_eq!(again.bytes().await.unwrap(), bytes, "the same frame encoded differently");
+    assert_eq!(encoded(), after_first, "a second GET of the same frame encoded it again");
+    let revalidated = get(png.clone(), Some(etag.clone())).await.unwrap();
+    assert_eq!(revalidated.status(), 304);
+    assert_eq!(revalidated.headers()["etag"].to_str().unwrap(), etag);
+    let exr = get(format!("/v1/sessions/{id}/frame.exr?tick=0"), Some(etag.clone())).await.unwrap();
+    assert_eq!(exr.status(), 200, "another format's ETag differs");
+    assert_eq!(encoded(), after_first + 1, "the EXR is a second encoding");
+
+    // Three WebSocket subscribers and an HTTP client of the next tick: one PNG encoding.
+    let url = s.ws_url(&format!("/v1/sessions/{id}/ws"));
+    let mut sockets = Vec::new();
+    for _ in 0..3 {
+        let mut ws = common::ws::open(&url).await;
+        send(&mut ws, json!({"type": "subscribe", "frames": "png", "stats": false})).await;
+        send(&mut ws, json!({"type": "no-such-message"})).await;
+        assert!(matches!(next(&mut ws).await, Message::Text(_)), "the subscription is in place");
+        sockets.push(ws);
+    }
+    let before_tick = encoded();
+    s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
+    let mut frames = Vec::new();
+    for ws in &mut sockets {
+        loop {
+            if let Message::Binary(b) = next(ws).await {
+                frames.push(b[relume::server::protocol::FRAME_HEADER_LEN..].to_vec());
+                break;
+            }
+        }
+    }
+    let http_tick1 = get(format!("/v1/sessions/{id}/frame.png?tick=1"), None).await.unwrap().bytes().await.unwrap();
+    assert!(frames.iter().all(|f| f[..] == http_tick1[..]), "subscribers got different bytes");
+    assert_eq!(encoded(), before_tick + 1, "each subscriber encoded its own copy");
+}

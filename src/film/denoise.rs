@@ -149,6 +149,12 @@ impl Denoiser {
         self.settings
     }
 
+    /// Whether denoising can start here: makes and drops a tiny denoiser, so a missing OIDN
+    /// library is reported when the service starts rather than at the first session.
+    pub fn probe() -> Result<(), DenoiseError> {
+        Denoiser::new(DenoiseSettings { quality: DenoiseQuality::Fast, aux: false }, 8, 8).map(drop)
+    }
+
     /// The denoised copy of `image`, guided by `aux` when the settings ask for it.
     pub fn denoise(&mut self, image: &LinearImage, aux: Option<&AuxImages>) -> Result<LinearImage, DenoiseError> {
         if image.width != self.width || image.height != self.height {

@@ -25,6 +25,8 @@ pub struct Metrics {
     tick_buckets: [AtomicU64; TICK_BUCKETS.len()],
     tick_count: AtomicU64,
     encode_micros: AtomicU64,
+    /// Encodings made (one per tick, format, image and exposure, however many clients asked).
+    pub frames_encoded: AtomicU64,
     tick_sum_micros: AtomicU64,
     rejected: Mutex<BTreeMap<&'static str, u64>>,
 }
@@ -45,6 +47,7 @@ impl Metrics {
     /// Time spent encoding frames for clients (the service's main cost besides ticking).
     pub fn observe_encode(&self, seconds: f64) {
         self.encode_micros.fetch_add((seconds * 1e6) as u64, Ordering::Relaxed);
+        self.frames_encoded.fetch_add(1, Ordering::Relaxed);
     }
 
     pub fn reject(&self, reason: &'static str) {
@@ -91,6 +94,11 @@ impl Metrics {
             out,
             "# HELP relume_encode_seconds_total Time spent encoding frames.\n# TYPE relume_encode_seconds_total counter\nrelume_encode_seconds_total {}",
             get(&self.encode_micros) as f64 / 1e6
+        );
+        let _ = writeln!(
+            out,
+            "# HELP relume_frames_encoded_total Frame encodings made (each shared by every client asking for it).\n# TYPE relume_frames_encoded_total counter\nrelume_frames_encoded_total {}",
+            get(&self.frames_encoded)
         );
         let _ = writeln!(
             out,

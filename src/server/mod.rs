@@ -8,6 +8,7 @@
 //! worker thread (`worker.rs`) inside the shared rayon pool. No lock is held across `.await`.
 //! Errors: every client fault is a 4xx JSON `{error, detail}`; internal faults are 500s with a
 //! log line. When a token is configured, every `/v1` route requires `Authorization: Bearer`.
+pub mod encoded;
 pub mod error;
 pub mod metrics;
 pub mod protocol;

@@ -1,11 +1,12 @@
 //! HTTP handlers. Each maps client faults to a 4xx `{error, detail}` and never panics.
+use super::encoded::EncodingKey;
 use super::error::ApiError;
 use super::protocol::{CreateSession, EditBatch, SceneList, SessionList, SessionView, StatsHistory, TickDone};
 use super::state::{view, AppState};
-use crate::film::{encode, ImageFormat};
+use crate::film::ImageFormat;
 use axum::body::{Body, Bytes};
 use axum::extract::{FromRequest, Path, Query, Request, State};
-use axum::http::{header, HeaderValue, StatusCode};
+use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde::de::DeserializeOwned;
@@ -148,6 +149,15 @@ pub async fn post_tick(State(s): State<Shared>, Path(id): Path<String>) -> Resul
     Ok(Json(TickDone { frame_url: format!("/v1/sessions/{id}/frame.png?tick={}", stats.tick), stats }))
 }
 
+/// Shared encoded bytes as a response body, without copying them.
+struct ArcBytes(Arc<Vec<u8>>);
+
+impl AsRef<[u8]> for ArcBytes {
+    fn as_ref(&self) -> &[u8] {
+        self.0.as_slice()
+    }
+}
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FrameQuery {
@@ -162,6 +172,7 @@ pub struct FrameQuery {
 pub async fn get_frame(
     State(s): State<Shared>,
     Path((id, file)): Path<(String, String)>,
+    headers: HeaderMap,
     query: Result<Query<FrameQuery>, axum::extract::rejection::QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(|e| ApiError::invalid(format!("query: {}", e.body_text())))?;
@@ -210,23 +221,28 @@ pub async fn get_frame(
             ))
         }
     };
-    let image = frame.clone();
-    let raw = q.denoised == Some(false);
-    let metrics = s.metrics.clone();
-    let bytes = tokio::task::spawn_blocking(move || {
-        let t = std::time::Instant::now();
-        let bytes = encode(image.shown(raw), format, exposure);
-        metrics.observe_encode(t.elapsed().as_secs_f64());
-        bytes
-    })
-    .await
-    .map_err(|e| ApiError::internal(e.to_string()))?
-    .map_err(|e| ApiError::internal(e.to_string()))?;
-    s.metrics.sent(bytes.len());
-    let mut resp = Response::new(Body::from(bytes));
+    let key = EncodingKey::new(&frame, format, q.denoised == Some(false), exposure);
+    let etag = HeaderValue::from_str(&key.etag()).map_err(|e| ApiError::internal(e.to_string()))?;
+    let mut resp = if headers.get(header::IF_NONE_MATCH) == Some(&etag) {
+        // The client holds these bytes already.
+        Response::builder()
+            .status(StatusCode::NOT_MODIFIED)
+            .body(Body::empty())
+            .map_err(|e| ApiError::internal(e.to_string()))?
+    } else {
+        let (metrics, shared, f) = (s.metrics.clone(), entry.clone(), frame.clone());
+        let bytes = tokio::task::spawn_blocking(move || shared.handle.encoded.get(&f, key, &metrics))
+            .await
+            .map_err(|e| ApiError::internal(e.to_string()))?
+            .map_err(ApiError::internal)?;
+        s.metrics.sent(bytes.len());
+        Response::new(Body::from(Bytes::from_owner(ArcBytes(bytes))))
+    };
     let h = resp.headers_mut();
     h.insert(header::CONTENT_TYPE, HeaderValue::from_static(format.mime()));
-    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-store"));
+    // Clients may keep a frame, but must ask again (If-None-Match) before showing it.
+    h.insert(header::CACHE_CONTROL, HeaderValue::from_static("no-cache"));
+    h.insert(header::ETAG, etag);
     h.insert("x-relume-tick", HeaderValue::from(frame.tick));
     h.insert("x-relume-accumulation-id", HeaderValue::from(frame.accumulation_id));
     h.insert("x-relume-spp", HeaderValue::from(frame.spp));

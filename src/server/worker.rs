@@ -60,6 +60,8 @@ pub struct SessionHandle {
     pub frames: watch::Receiver<Option<Arc<PublishedFrame>>>,
     pub history: Arc<Mutex<VecDeque<TickStats>>>,
     pub failure: Arc<Mutex<Option<String>>>,
+    /// The last encodings of its frames, shared by every client.
+    pub encoded: super::encoded::EncodedFrames,
     thread: Mutex<Option<JoinHandle<()>>>,
 }
 
@@ -149,7 +151,14 @@ impl SessionHandle {
         let worker = Worker { session, pool, metrics, publish, history: history.clone(), failure: failure.clone() };
         let thread =
             std::thread::Builder::new().name(format!("session-{id}")).spawn(move || run(worker, rx, tick_hz))?;
-        Ok(SessionHandle { commands: Mutex::new(tx), frames, history, failure, thread: Mutex::new(Some(thread)) })
+        Ok(SessionHandle {
+            commands: Mutex::new(tx),
+            frames,
+            history,
+            failure,
+            encoded: Default::default(),
+            thread: Mutex::new(Some(thread)),
+        })
     }
 
     fn send(&self, c: Command) -> Result<(), ApiError> {

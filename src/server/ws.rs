@@ -8,11 +8,12 @@
 //! it never saw are counted (`frames_dropped` in each stats message and in `/metrics`). Edits are
 //! never dropped: each batch is acknowledged (`edits_accepted`) or answered with an `error`.
 //! A bad message gets an `error` reply and the connection stays open.
+use super::encoded::EncodingKey;
 use super::error::ApiError;
 use super::protocol::{ClientMessage, FrameFormat, FrameHeader, ServerMessage};
 use super::routes::{parse_body, Shared};
 use super::state::{valid_name, SessionEntry};
-use crate::film::{encode, ImageFormat};
+use crate::film::ImageFormat;
 use crate::scene::animation::Animation;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Path, State};
@@ -142,15 +143,9 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
                     FrameFormat::None => continue,
                 };
                 let header = FrameHeader { tick: frame.tick, accumulation_id: frame.accumulation_id, format: sub.frames, width: frame.image.width, height: frame.image.height };
-                let image = frame.clone();
-                let raw = !sub.denoised;
-                let metrics = state.metrics.clone();
-                let encoded = tokio::task::spawn_blocking(move || {
-                    let t = std::time::Instant::now();
-                    let bytes = encode(image.shown(raw), format, 0.0);
-                    metrics.observe_encode(t.elapsed().as_secs_f64());
-                    bytes
-                });
+                let key = EncodingKey::new(&frame, format, !sub.denoised, 0.0);
+                let (metrics, shared) = (state.metrics.clone(), entry.clone());
+                let encoded = tokio::task::spawn_blocking(move || shared.handle.encoded.get(&frame, key, &metrics));
                 let Ok(Ok(bytes)) = encoded.await else { continue };
                 let mut payload = Vec::with_capacity(bytes.len() + 32);
                 payload.extend_from_slice(&header.encode());

@@ -108,6 +108,10 @@ pub fn run(args: ServeArgs) -> Result<()> {
         let listener =
             tokio::net::TcpListener::bind(args.addr).await.with_context(|| format!("binding {}", args.addr))?;
         tracing::info!(target: "relume::server", "listening on http://{} (Embree kernels: {})", listener.local_addr()?, state.device.isa());
+        match crate::film::Denoiser::probe() {
+            Ok(()) => tracing::info!(target: "relume::server", "denoise: Open Image Denoise is available"),
+            Err(e) => eprintln!("relume: warning: {e}; sessions asking for \"denoise\" will be refused"),
+        }
         eprintln!("relume: serving {} on http://{}/ (Ctrl-C to stop)", args.scenes.display(), listener.local_addr()?);
         server::run(listener, state, server::shutdown_signal()).await?;
         Ok(())

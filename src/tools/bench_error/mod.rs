@@ -3,6 +3,11 @@
 //! `path` reference (`reference.rs`) by relMSE, RMSE, PSNR and FLIP (`metrics.rs`). Tick times
 //! are the median of `--repeats` runs. Results go to DIR as CSV, JSON, a Markdown report, plots
 //! (`plots.rs`) and false-colour FLIP maps of each configuration's worst frame (`report.rs`).
+//!
+//! A spec with the suffix `+oidn` (or `+oidn=fast|balanced|high`, and `:noaux` for colour
+//! only: `path:spp=1+oidn=fast:noaux`) runs the same technique with
+//! the denoise stage and is measured on its denoised frames; `--denoise[=QUALITY]` adds such a
+//! twin for every spec, so each technique appears with and without the denoiser.
 mod metrics;
 mod plots;
 mod reference;
@@ -11,6 +16,7 @@ mod report;
 use super::render::load_scene;
 use super::{progress_bar, SceneArgs, UsageError};
 use crate::engine::{thread_pool, Session};
+use crate::film::{DenoiseQuality, DenoiseSettings};
 use crate::scene::animation::Animation;
 use crate::technique::TechniqueConfig;
 use anyhow::{Context, Result};
@@ -54,6 +60,69 @@ pub struct ErrorArgs {
     /// Where references are cached.
     #[arg(long, default_value = ".relume-cache/references")]
     pub cache: PathBuf,
+    /// Also run every spec with the denoise stage (`+oidn`): `--denoise` (quality high) or
+    /// `--denoise=fast|balanced|high`.
+    #[arg(long, value_name = "QUALITY", num_args = 0..=1, require_equals = true, default_missing_value = "high")]
+    pub denoise: Option<String>,
+}
+
+/// One benchmarked configuration: a technique, denoised or not.
+#[derive(Clone, Debug, PartialEq)]
+pub struct BenchConfig {
+    pub technique: TechniqueConfig,
+    pub denoise: Option<DenoiseSettings>,
+}
+
+impl BenchConfig {
+    /// `SPEC[+oidn[=QUALITY][:noaux]]`.
+    pub fn parse(spec: &str) -> Result<BenchConfig, UsageError> {
+        let (technique, denoise) = match spec.split_once("+oidn") {
+            None => (spec, None),
+            Some((t, "")) => (t, Some(DenoiseSettings::default())),
+            Some((t, rest)) => {
+                let bad = || {
+                    UsageError(format!(
+                        "--techniques: '{spec}': after +oidn comes nothing, =QUALITY ({}) or =QUALITY:noaux",
+                        DenoiseQuality::NAMES.join(", ")
+                    ))
+                };
+                let rest = rest.strip_prefix('=').ok_or_else(bad)?;
+                let (quality, aux) = match rest.split_once(':') {
+                    None => (rest, true),
+                    Some((q, "noaux")) => (q, false),
+                    Some(_) => return Err(bad()),
+                };
+                let quality = DenoiseQuality::parse(quality).ok_or_else(bad)?;
+                (t, Some(DenoiseSettings { quality, aux }))
+            }
+        };
+        let technique = TechniqueConfig::from_spec(technique).map_err(|e| UsageError(format!("--techniques: {e}")))?;
+        Ok(BenchConfig { technique, denoise })
+    }
+
+    pub fn label(&self) -> String {
+        let t = self.technique.label();
+        match self.denoise {
+            None => t,
+            Some(d) if d == DenoiseSettings::default() => format!("{t}+oidn"),
+            Some(d) if d.aux => format!("{t}+oidn={}", d.quality.name()),
+            Some(d) => format!("{t}+oidn={}:noaux", d.quality.name()),
+        }
+    }
+}
+
+/// The specs of `--techniques`, each followed by its denoised twin when `--denoise` asks.
+fn bench_configs(techniques: &str, denoise: Option<&str>) -> Result<Vec<BenchConfig>, UsageError> {
+    let twin = super::denoise_settings(denoise)?;
+    let mut out = Vec::new();
+    for spec in techniques.split(',') {
+        let config = BenchConfig::parse(spec.trim())?;
+        let denoised =
+            twin.filter(|_| config.denoise.is_none()).map(|d| BenchConfig { denoise: Some(d), ..config.clone() });
+        out.push(config);
+        out.extend(denoised);
+    }
+    Ok(out)
 }
 
 /// One frame of one configuration.
@@ -109,11 +178,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
     if !(args.fps > 0.0 && args.fps.is_finite()) {
         return Err(UsageError("--fps must be a positive number".into()).into());
     }
-    let configs: Vec<TechniqueConfig> = args
-        .techniques
-        .split(',')
-        .map(|s| TechniqueConfig::from_spec(s.trim()).map_err(|e| UsageError(format!("--techniques: {e}"))))
-        .collect::<Result<_, _>>()?;
+    let configs = bench_configs(&args.techniques, args.denoise.as_deref())?;
     let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
     let scene_file = std::fs::read(&args.target.scene)?;
     let (animation, animation_file) = match &args.anim {
@@ -165,7 +230,10 @@ pub fn run(args: ErrorArgs) -> Result<()> {
         run_bar.set_message(label.clone());
         let mut runs: Vec<Vec<FrameResult>> = Vec::new();
         for repeat in 0..args.repeats {
-            let mut session = Session::new(scene.clone(), config, args.seed, &device)?;
+            let mut session = Session::new(scene.clone(), &config.technique, args.seed, &device)?;
+            if let Some(settings) = config.denoise {
+                session.enable_denoise(settings)?;
+            }
             let mut run = Vec::new();
             pool.install(|| -> Result<()> {
                 for frame in 0..args.frames {
@@ -177,7 +245,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
                     let t = &f.stats.times;
                     let error = match (repeat, frame % args.every == 0, reference_at(time)) {
                         (0, true, Some(r)) => {
-                            let (e, map) = metrics::compare(&f.image, &r.image);
+                            let (e, map) = metrics::compare(f.shown(false), &r.image);
                             let worst = error_maps.get(&label).map_or(-1.0, |w| w.1);
                             if e.flip_hdr > worst {
                                 error_maps.insert(label.clone(), (frame, e.flip_hdr, metrics::false_colour(&map)));
@@ -196,8 +264,9 @@ pub fn run(args: ErrorArgs) -> Result<()> {
                             ("update", t.update_ms),
                             ("render", t.render_ms),
                             ("resolve", t.resolve_ms),
+                            ("denoise", t.denoise_ms),
                         ]),
-                        rays: f.stats.rays.total(),
+                        rays: f.stats.rays.total() + f.stats.aux_rays,
                         memory_bytes: f.stats.detail.memory_bytes(),
                         error,
                     });
@@ -212,7 +281,8 @@ pub fn run(args: ErrorArgs) -> Result<()> {
     run_bar.finish_and_clear();
 
     let reference_rel_mse = references.iter().map(|(_, r)| r.self_rel_mse).fold(0.0, f64::max);
-    let summaries = report::summarise(&configs, &frames);
+    let labels: Vec<String> = configs.iter().map(BenchConfig::label).collect();
+    let summaries = report::summarise(&labels, &frames);
     let report = ErrorReport {
         scene: args.target.scene.display().to_string(),
         animation: args.anim.as_ref().map(|p| p.display().to_string()),

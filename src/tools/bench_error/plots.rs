@@ -93,13 +93,24 @@ impl Plot for TimeVsError<'_> {
             .map_err(err)?
             .label("Pareto front")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.mix(0.5)));
+        // Denoised configurations (`+oidn`) are triangles, the raw ones circles.
         for (i, x) in s.iter().enumerate() {
             let c = colour(i);
-            chart
-                .draw_series(std::iter::once(Circle::new((x.tick_ms_median, x.flip_hdr), 7, c.filled())))
-                .map_err(err)?
-                .label(format!("{}{}", if x.pareto { "★ " } else { "" }, x.config))
-                .legend(move |(px, py)| Circle::new((px + 9, py), 6, c.filled()));
+            let label = format!("{}{}", if x.pareto { "★ " } else { "" }, x.config);
+            let at = (x.tick_ms_median, x.flip_hdr);
+            if x.config.contains("+oidn") {
+                chart
+                    .draw_series(std::iter::once(TriangleMarker::new(at, 9, c.filled())))
+                    .map_err(err)?
+                    .label(label)
+                    .legend(move |(px, py)| TriangleMarker::new((px + 9, py), 7, c.filled()));
+            } else {
+                chart
+                    .draw_series(std::iter::once(Circle::new(at, 7, c.filled())))
+                    .map_err(err)?
+                    .label(label)
+                    .legend(move |(px, py)| Circle::new((px + 9, py), 6, c.filled()));
+            }
         }
         legend(&mut chart)
     }

@@ -1,7 +1,6 @@
 //! Summaries and files of `relume bench error`: `results.csv`, `results.json`, `report.md` and
 //! `errors/<config>.png` (the FLIP map of each configuration's worst measured frame, in magma).
 use super::{ConfigSummary, ErrorReport, FrameResult};
-use crate::technique::TechniqueConfig;
 use crate::tools::quantile;
 use anyhow::{Context, Result};
 use std::collections::BTreeMap;
@@ -26,11 +25,11 @@ pub fn merge_repeats(mut runs: Vec<Vec<FrameResult>>) -> Vec<FrameResult> {
 }
 
 /// Per-configuration summaries, with the Pareto front of (tick time, HDR-FLIP) marked.
-pub fn summarise(configs: &[TechniqueConfig], frames: &[FrameResult]) -> Vec<ConfigSummary> {
-    let mut out: Vec<ConfigSummary> = configs
+pub fn summarise(labels: &[String], frames: &[FrameResult]) -> Vec<ConfigSummary> {
+    let mut out: Vec<ConfigSummary> = labels
         .iter()
-        .map(|c| {
-            let label = c.label();
+        .map(|label| {
+            let label = label.clone();
             let mine: Vec<&FrameResult> = frames.iter().filter(|f| f.config == label).collect();
             let errors: Vec<(u32, super::ImageError)> =
                 mine.iter().filter_map(|f| f.error.map(|e| (f.frame, e))).collect();
