@@ -376,3 +376,57 @@ async fn every_accepted_batch_is_numbered_and_ticks_say_which_are_applied() {
     );
     s.shutdown().await.unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tick_requests_join_the_queued_tick_instead_of_piling_up() {
+    // Hazard: every POST /tick queued its own tick, so one client firing 40 at once made the
+    // session run 40 ticks back to back on the shared pool, the other sessions waiting.
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s
+        .session(json!({"scene": "cornell-box", "width": 64, "height": 64, "technique": {"id": "path", "spp": 4}}))
+        .await;
+    let path = format!("/v1/sessions/{id}/tick");
+    let answers = futures_util::future::join_all((0..40).map(|_| post(&s, &path, Value::Null))).await;
+    let mut ticks: Vec<u64> = answers
+        .iter()
+        .map(|(status, body)| {
+            assert_eq!(*status, 200, "{body}");
+            body["stats"]["tick"].as_u64().expect("tick")
+        })
+        .collect();
+    ticks.sort_unstable();
+    ticks.dedup();
+    let view: Value = s.http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    eprintln!("40 concurrent tick requests ran {} ticks: {ticks:?}", ticks.len());
+    assert_eq!(view["ticks"].as_u64(), Some(ticks.len() as u64), "every tick run answered someone");
+    assert!(ticks.len() < 40, "no request joined a queued tick");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_flooding_a_busy_session_gets_429_and_the_queue_stays_bounded() {
+    // Hazard: the command channel was unbounded: while a slow tick ran, a client could queue
+    // edit batches (each up to the body limit) without end.
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s
+        .session(json!({"scene": "cornell-box", "width": 128, "height": 128, "technique": {"id": "path", "spp": 64}}))
+        .await;
+    let tick = {
+        let (http, url) = (s.http.clone(), s.url(&format!("/v1/sessions/{id}/tick")));
+        tokio::spawn(async move { http.post(url).send().await.map(|r| r.status().as_u16()) })
+    };
+    tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    let edit = json!({"edits": [{"target": "camera", "vfov_deg": 39.5}]});
+    let path = format!("/v1/sessions/{id}/edits");
+    let answers = futures_util::future::join_all(
+        (0..3 * relume::server::worker::COMMAND_QUEUE).map(|_| post(&s, &path, edit.clone())),
+    )
+    .await;
+    let busy = answers.iter().filter(|(status, body)| *status == 429 && body["error"] == "session_busy").count();
+    let accepted = answers.iter().filter(|(status, _)| *status == 202).count();
+    eprintln!("{accepted} batches accepted, {busy} refused as busy");
+    assert!(busy > 0, "no batch was refused while the queue was full");
+    assert_eq!(busy + accepted, answers.len(), "every batch was either accepted or refused as busy");
+    assert_eq!(tick.await.unwrap().unwrap(), 200);
+    // The session is healthy once the queue drains.
+    assert_eq!(post(&s, &path, edit).await.0, 202);
+}

@@ -1,8 +1,12 @@
 //! One session's worker: a dedicated thread that owns the [`Session`] and runs its ticks on the
 //! shared rayon pool, so no CPU work runs on the async runtime.
 //!
-//! Commands arrive over a channel; replies go back through oneshot channels. Ticks are
-//! client-driven (`Tick`), or server-driven at `tick_hz` and while an animation plays. Each
+//! Commands arrive over a bounded channel ([`COMMAND_QUEUE`] deep: a client that sends faster
+//! than the session works gets 429 `session_busy` instead of growing the queue); replies go
+//! back through oneshot channels. Ticks are client-driven (`Tick`), or server-driven at
+//! `tick_hz` and while an animation plays. A tick request that finds a tick already queued and
+//! not yet started joins it instead of queueing another, so a session has at most one tick
+//! waiting however many clients ask, and every one of them gets that tick's stats. Each
 //! tick's frame is published through a `watch` channel (newest frame wins) and its stats are
 //! kept in a bounded history. A panic inside a tick marks the session failed with the panic's
 //! message; the process and the other sessions carry on.
@@ -21,6 +25,12 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use tokio::sync::{oneshot, watch};
 
+/// Commands a session's queue holds before new ones are refused with 429.
+pub const COMMAND_QUEUE: usize = 64;
+
+/// Clients waiting for the queued tick.
+type TickWaiters = Arc<Mutex<Vec<oneshot::Sender<Result<TickStats, ApiError>>>>>;
+
 /// How many ticks' stats a session keeps.
 pub const STATS_HISTORY: usize = 256;
 /// The longest period between scheduled ticks (`tick_hz` is validated to at least 0.01).
@@ -38,9 +48,8 @@ pub enum Command {
         batch: Vec<Edit>,
         reply: oneshot::Sender<Result<EditsAccepted, ApiError>>,
     },
-    Tick {
-        reply: oneshot::Sender<Result<TickStats, ApiError>>,
-    },
+    /// Run one tick and answer every client waiting in [`SessionHandle`]'s tick waiters.
+    Tick,
     Play {
         anim: Box<Animation>,
         speed: f32,
@@ -56,7 +65,8 @@ pub enum Command {
 
 /// The handle the server keeps for a session.
 pub struct SessionHandle {
-    commands: Mutex<mpsc::Sender<Command>>,
+    commands: Mutex<mpsc::SyncSender<Command>>,
+    tick_waiters: TickWaiters,
     pub frames: watch::Receiver<Option<Arc<PublishedFrame>>>,
     pub history: Arc<Mutex<VecDeque<TickStats>>>,
     pub failure: Arc<Mutex<Option<String>>>,
@@ -84,9 +94,19 @@ struct Worker {
     publish: watch::Sender<Option<Arc<PublishedFrame>>>,
     history: Arc<Mutex<VecDeque<TickStats>>>,
     failure: Arc<Mutex<Option<String>>>,
+    tick_waiters: TickWaiters,
 }
 
 impl Worker {
+    /// Runs the queued tick and answers everyone who asked for it.
+    fn tick_for_waiters(&mut self) {
+        let waiters = self.tick_waiters.lock().map(|mut w| std::mem::take(&mut *w)).unwrap_or_default();
+        let result = self.tick();
+        for reply in waiters {
+            let _ = reply.send(result.clone());
+        }
+    }
+
     fn failure(&self) -> Option<String> {
         self.failure.lock().ok().and_then(|f| f.clone())
     }
@@ -144,15 +164,25 @@ impl SessionHandle {
         pool: Arc<rayon::ThreadPool>,
         metrics: Arc<Metrics>,
     ) -> std::io::Result<SessionHandle> {
-        let (tx, rx) = mpsc::channel();
+        let (tx, rx) = mpsc::sync_channel(COMMAND_QUEUE);
         let (publish, frames) = watch::channel(None);
         let history = Arc::new(Mutex::new(VecDeque::new()));
         let failure = Arc::new(Mutex::new(None));
-        let worker = Worker { session, pool, metrics, publish, history: history.clone(), failure: failure.clone() };
+        let tick_waiters = TickWaiters::default();
+        let worker = Worker {
+            session,
+            pool,
+            metrics,
+            publish,
+            history: history.clone(),
+            failure: failure.clone(),
+            tick_waiters: tick_waiters.clone(),
+        };
         let thread =
             std::thread::Builder::new().name(format!("session-{id}")).spawn(move || run(worker, rx, tick_hz))?;
         Ok(SessionHandle {
             commands: Mutex::new(tx),
+            tick_waiters,
             frames,
             history,
             failure,
@@ -161,8 +191,17 @@ impl SessionHandle {
         })
     }
 
+    /// Queues a command, or refuses it with 429 when the queue is full.
     fn send(&self, c: Command) -> Result<(), ApiError> {
-        self.commands.lock().map_err(|_| gone())?.send(c).map_err(|_| gone())
+        match self.commands.lock().map_err(|_| gone())?.try_send(c) {
+            Ok(()) => Ok(()),
+            Err(mpsc::TrySendError::Full(_)) => Err(ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "session_busy",
+                format!("the session has {COMMAND_QUEUE} commands waiting; wait for their answers before sending more"),
+            )),
+            Err(mpsc::TrySendError::Disconnected(_)) => Err(gone()),
+        }
     }
 
     pub fn failure(&self) -> Option<String> {
@@ -175,9 +214,20 @@ impl SessionHandle {
         answer.await.map_err(|_| gone())?
     }
 
+    /// Asks for a tick: joins the queued one if there is one (it has not started, so it will
+    /// include everything this client sent before), else queues a new one.
     pub async fn tick(&self) -> Result<TickStats, ApiError> {
         let (reply, answer) = oneshot::channel();
-        self.send(Command::Tick { reply })?;
+        {
+            let mut waiters = self.tick_waiters.lock().map_err(|_| gone())?;
+            waiters.push(reply);
+            if waiters.len() == 1 {
+                if let Err(e) = self.send(Command::Tick) {
+                    waiters.clear();
+                    return Err(e);
+                }
+            }
+        }
         answer.await.map_err(|_| gone())?
     }
 
@@ -201,7 +251,10 @@ impl SessionHandle {
     /// Stops the worker after the command in progress and waits for it (blocking: call from
     /// `spawn_blocking`).
     pub fn shutdown_blocking(&self) {
-        let _ = self.send(Command::Shutdown);
+        // Blocks while the queue is full: the worker drains it.
+        if let Ok(commands) = self.commands.lock() {
+            let _ = commands.send(Command::Shutdown);
+        }
         if let Some(t) = self.thread.lock().ok().and_then(|mut t| t.take()) {
             let _ = t.join();
         }
@@ -253,9 +306,7 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
             Some(Command::Edits { batch, reply }) => {
                 let _ = reply.send(w.queue(batch));
             }
-            Some(Command::Tick { reply }) => {
-                let _ = reply.send(w.tick());
-            }
+            Some(Command::Tick) => w.tick_for_waiters(),
             Some(Command::Play { anim, speed, reply }) => {
                 let checked = anim.validate(w.session.scene()).map_err(|e| ApiError::invalid(format!("anim: {e}")));
                 if checked.is_ok() {
