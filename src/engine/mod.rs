@@ -221,13 +221,7 @@ impl Session {
 
         // Denoise, keeping the raw image.
         let t = Instant::now();
-        let (denoised, aux_rays) = match &mut self.denoise {
-            Some(stage) => {
-                let (d, work) = stage.run(&self.scene, &self.accel, self.seed, &image)?;
-                (Some(d), work.rays)
-            }
-            None => (None, 0),
-        };
+        let (denoised, aux_rays) = self.denoise_step(&image)?;
         times.denoise_ms = if self.denoise.is_some() { ms(t) } else { 0.0 };
         times.total_ms = ms(start);
 
@@ -257,6 +251,17 @@ impl Session {
         };
         self.tick += 1;
         Ok(frame)
+    }
+
+    /// The denoised image and the auxiliary pass's rays, when the session denoises.
+    fn denoise_step(&mut self, image: &LinearImage) -> Result<(Option<LinearImage>, u64), EngineError> {
+        match &mut self.denoise {
+            Some(stage) => {
+                let (denoised, work) = stage.run(&self.scene, &self.accel, self.seed, image)?;
+                Ok((Some(denoised), work.rays))
+            }
+            None => Ok((None, 0)),
+        }
     }
 }
 

@@ -301,3 +301,31 @@ pub fn run(args: ErrorArgs) -> Result<()> {
     println!("wrote {}", args.out.display());
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn oidn_suffixes_parse_into_denoise_settings_and_labels_round_trip() {
+        let c = BenchConfig::parse("path:spp=1+oidn=fast:noaux").expect("spec");
+        assert_eq!(c.denoise, Some(DenoiseSettings { quality: DenoiseQuality::Fast, aux: false }));
+        assert_eq!(BenchConfig::parse(&c.label()).expect("label"), c);
+        let d = BenchConfig::parse("bdpt+oidn").expect("spec");
+        assert_eq!(d.denoise, Some(DenoiseSettings::default()));
+        assert!(d.label().ends_with("+oidn"));
+        for bad in ["path+oidn=ultra", "path+oidnx", "path+oidn=fast:aux"] {
+            assert!(BenchConfig::parse(bad).is_err(), "{bad} parsed");
+        }
+    }
+
+    #[test]
+    fn denoise_adds_a_twin_of_every_spec_without_one() {
+        let all = bench_configs("path,bdpt+oidn=fast", Some("high")).expect("specs");
+        let labels: Vec<String> = all.iter().map(BenchConfig::label).collect();
+        assert_eq!(all.len(), 3, "{labels:?}");
+        assert_eq!(all[0].denoise, None);
+        assert_eq!(all[1].denoise, Some(DenoiseSettings::default()));
+        assert_eq!(all[2].denoise.map(|d| d.quality), Some(DenoiseQuality::Fast));
+    }
+}
