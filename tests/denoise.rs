@@ -149,3 +149,29 @@ fn auxiliary_pass_stops_when_converged_and_restarts_on_camera_edits() {
         assert!(session.tick().expect("tick").stats.aux_rays >= 32 * 32, "a camera edit left the aux images stale");
     });
 }
+
+/// After the auxiliary images converge the stage stops sending them, and OIDN keeps the last
+/// ones: the frame must equal a fresh denoise of the same raw image with freshly traced
+/// auxiliary images (same seed). Control: the same image denoised without them differs.
+#[test]
+fn kept_auxiliary_images_denoise_like_freshly_traced_ones() {
+    let settings = DenoiseSettings { quality: DenoiseQuality::Fast, aux: true };
+    let (frame, mut session) = run(11, relume::film::AuxFilm::TARGET_PASSES + 3, Some(settings));
+    let pool = thread_pool(2).expect("pool");
+    let mut denoise_once = |settings: DenoiseSettings| {
+        let (s, raw) = (&mut session, &frame.image);
+        pool.install(move || s.denoise_once(settings, raw)).expect("denoise")
+    };
+    let fresh = denoise_once(settings);
+    let colour_only = denoise_once(DenoiseSettings { aux: false, ..settings });
+    let denoised = frame.denoised.as_ref().expect("denoised");
+    assert_eq!(frame.stats.aux_rays, 0, "the auxiliary images were still being traced");
+    let worst = denoised
+        .pixels
+        .iter()
+        .zip(&fresh.pixels)
+        .flat_map(|(a, b)| (*a - *b).to_array().map(f32::abs))
+        .fold(0.0, f32::max);
+    assert!(worst < 1e-5, "kept auxiliary images differ from fresh ones by {worst}");
+    assert_ne!(denoised, &colour_only, "control: the auxiliary images change nothing");
+}

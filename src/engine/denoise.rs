@@ -24,6 +24,8 @@ const AUX_STREAM: u64 = 0xA0C5_11A2_D1E5_0153;
 pub struct DenoiseStage {
     denoiser: Denoiser,
     aux: AuxFilm,
+    /// The denoiser holds the current auxiliary images (none added or reset since it got them).
+    aux_sent: bool,
 }
 
 /// What one tick's denoise stage traced.
@@ -35,7 +37,11 @@ pub struct AuxWork {
 
 impl DenoiseStage {
     pub fn new(settings: DenoiseSettings, width: u32, height: u32) -> Result<DenoiseStage, DenoiseError> {
-        Ok(DenoiseStage { denoiser: Denoiser::new(settings, width, height)?, aux: AuxFilm::new(width, height) })
+        Ok(DenoiseStage {
+            denoiser: Denoiser::new(settings, width, height)?,
+            aux: AuxFilm::new(width, height),
+            aux_sent: false,
+        })
     }
 
     pub fn settings(&self) -> DenoiseSettings {
@@ -51,6 +57,7 @@ impl DenoiseStage {
     pub fn update(&mut self, delta: &SceneDelta) {
         if delta.camera || !delta.moved.is_empty() || !delta.materials.is_empty() {
             self.aux.reset();
+            self.aux_sent = false;
         }
     }
 
@@ -66,8 +73,11 @@ impl DenoiseStage {
         if self.settings().aux && !self.aux.converged() {
             work.rays = self.trace_pass(scene, accel, seed);
         }
-        let aux = self.settings().aux.then(|| self.aux.resolve());
-        Ok((self.denoiser.denoise(image, aux.as_ref())?, work))
+        // Resolve and send the auxiliary images only when they changed.
+        let aux = (self.settings().aux && !self.aux_sent).then(|| self.aux.resolve());
+        let denoised = self.denoiser.denoise(image, aux)?;
+        self.aux_sent = true;
+        Ok((denoised, work))
     }
 
     /// Denoises one finished image: the auxiliary images are first traced to convergence (for a
@@ -111,6 +121,7 @@ impl DenoiseStage {
         let rays = traced.iter().map(|t| t.1).sum();
         let samples: Vec<AuxSample> = traced.into_iter().map(|t| t.0).collect();
         self.aux.add_pass(&samples);
+        self.aux_sent = false;
         rays
     }
 }

@@ -155,8 +155,10 @@ impl Denoiser {
         Denoiser::new(DenoiseSettings { quality: DenoiseQuality::Fast, aux: false }, 8, 8).map(drop)
     }
 
-    /// The denoised copy of `image`, guided by `aux` when the settings ask for it.
-    pub fn denoise(&mut self, image: &LinearImage, aux: Option<&AuxImages>) -> Result<LinearImage, DenoiseError> {
+    /// The denoised copy of `image`. When the settings ask for auxiliary images, `aux` brings
+    /// new ones; `None` keeps those of the last call (OIDN's buffers still hold them), so
+    /// unchanged images are not copied again.
+    pub fn denoise(&mut self, image: &LinearImage, aux: Option<AuxImages>) -> Result<LinearImage, DenoiseError> {
         if image.width != self.width || image.height != self.height {
             return Err(DenoiseError::Failed(format!(
                 "image is {}x{}, the denoiser was made for {}x{}",
@@ -164,7 +166,7 @@ impl Denoiser {
             )));
         }
         let color = image.pixels.iter().flat_map(|p| p.to_array()).collect();
-        let aux = aux.filter(|_| self.settings.aux).map(|a| (a.albedo.clone(), a.normal.clone()));
+        let aux = aux.filter(|_| self.settings.aux).map(|a| (a.albedo, a.normal));
         let jobs = self.jobs.as_ref().ok_or(DenoiseError::Stopped)?;
         jobs.send(Job { color, aux }).map_err(|_| DenoiseError::Stopped)?;
         let out = self.done.recv().map_err(|_| DenoiseError::Stopped)??;
