@@ -3,10 +3,13 @@
 //! and the raw one is the frame of a twin session that does not denoise.
 mod common;
 use common::server::TestServer;
+#[cfg(feature = "denoise")]
 use common::ws::{next, send};
+#[cfg(feature = "denoise")]
 use relume::server::protocol::FRAME_HEADER_LEN;
 use relume::server::Limits;
 use serde_json::{json, Value};
+#[cfg(feature = "denoise")]
 use tokio_tungstenite::tungstenite::Message;
 
 fn body(denoise: Option<Value>) -> Value {
@@ -18,11 +21,13 @@ fn body(denoise: Option<Value>) -> Value {
     b
 }
 
+#[cfg(feature = "denoise")]
 async fn tick(s: &TestServer, id: &str) {
     let r = s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
     assert_eq!(r.status(), 200);
 }
 
+#[cfg(feature = "denoise")]
 async fn exr(s: &TestServer, id: &str, query: &str) -> Vec<u8> {
     let r = s.http.get(s.url(&format!("/v1/sessions/{id}/frame.exr?tick=0{query}"))).send().await.unwrap();
     assert_eq!(r.status(), 200, "{query}");
@@ -30,6 +35,7 @@ async fn exr(s: &TestServer, id: &str, query: &str) -> Vec<u8> {
 }
 
 /// The next binary frame's encoded image.
+#[cfg(feature = "denoise")]
 async fn ws_frame(ws: &mut common::ws::Socket) -> Vec<u8> {
     loop {
         if let Message::Binary(b) = next(ws).await {

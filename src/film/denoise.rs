@@ -107,7 +107,6 @@ pub enum DenoiseError {
 }
 
 /// One image's worth of planar f32 RGB, sent to the denoiser thread and back.
-#[cfg_attr(not(feature = "denoise"), allow(dead_code))]
 struct Job {
     color: Vec<f32>,
     aux: Option<(Vec<f32>, Vec<f32>)>,
@@ -283,14 +282,19 @@ mod oidn_worker {
     use super::{DenoiseError, DenoiseSettings, Job};
     use std::sync::mpsc::{Receiver, Sender};
 
+    /// Without OIDN: reports that it cannot start, and answers any job the same way.
     pub(super) fn run(
         _: DenoiseSettings,
         _: usize,
         _: usize,
-        _: Receiver<Job>,
-        _: Sender<Result<Vec<f32>, DenoiseError>>,
+        jobs: Receiver<Job>,
+        done: Sender<Result<Vec<f32>, DenoiseError>>,
         ready: Sender<Result<(), DenoiseError>>,
     ) {
         let _ = ready.send(Err(DenoiseError::NotBuilt));
+        for Job { color, aux } in jobs {
+            drop((color, aux));
+            let _ = done.send(Err(DenoiseError::NotBuilt));
+        }
     }
 }
