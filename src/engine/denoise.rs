@@ -61,40 +61,28 @@ impl DenoiseStage {
         }
     }
 
-    /// Refines the auxiliary images (if asked for and not yet converged) and denoises `image`.
+    /// Refines the auxiliary images by up to `passes` samples per pixel (if asked for and not
+    /// yet converged) and denoises `image`. A tick passes 1; a still rendered once passes
+    /// [`AuxFilm::TARGET_PASSES`], as no later tick would refine them.
     pub fn run(
         &mut self,
         scene: &Scene,
         accel: &SceneAccel,
         seed: u64,
         image: &LinearImage,
+        passes: u32,
     ) -> Result<(LinearImage, AuxWork), DenoiseError> {
         let mut work = AuxWork::default();
-        if self.settings().aux && !self.aux.converged() {
-            work.rays = self.trace_pass(scene, accel, seed);
+        for _ in 0..passes {
+            if !self.settings().aux || self.aux.converged() {
+                break;
+            }
+            work.rays += self.trace_pass(scene, accel, seed);
         }
         // Resolve and send the auxiliary images only when they changed.
         let aux = (self.settings().aux && !self.aux_sent).then(|| self.aux.resolve());
         let denoised = self.denoiser.denoise(image, aux)?;
         self.aux_sent = true;
-        Ok((denoised, work))
-    }
-
-    /// Denoises one finished image: the auxiliary images are first traced to convergence (for a
-    /// still rendered once, where no later tick would refine them).
-    pub fn finish(
-        &mut self,
-        scene: &Scene,
-        accel: &SceneAccel,
-        seed: u64,
-        image: &LinearImage,
-    ) -> Result<(LinearImage, AuxWork), DenoiseError> {
-        let mut work = AuxWork::default();
-        while self.settings().aux && !self.aux.converged() {
-            work.rays += self.trace_pass(scene, accel, seed);
-        }
-        let (denoised, last) = self.run(scene, accel, seed, image)?;
-        work.rays += last.rays;
         Ok((denoised, work))
     }
 

@@ -127,7 +127,7 @@ impl Session {
     /// traced to convergence first: for a still, where denoising every tick would be wasted.
     pub fn denoise_once(&self, settings: DenoiseSettings, image: &LinearImage) -> Result<LinearImage, EngineError> {
         let mut stage = DenoiseStage::new(settings, self.film.width, self.film.height)?;
-        Ok(stage.finish(&self.scene, &self.accel, self.seed, image)?.0)
+        Ok(stage.run(&self.scene, &self.accel, self.seed, image, crate::film::AuxFilm::TARGET_PASSES)?.0)
     }
 
     /// The denoise stage, when the session denoises.
@@ -257,7 +257,7 @@ impl Session {
     fn denoise_step(&mut self, image: &LinearImage) -> Result<(Option<LinearImage>, u64), EngineError> {
         match &mut self.denoise {
             Some(stage) => {
-                let (denoised, work) = stage.run(&self.scene, &self.accel, self.seed, image)?;
+                let (denoised, work) = stage.run(&self.scene, &self.accel, self.seed, image, 1)?;
                 Ok((Some(denoised), work.rays))
             }
             None => Ok((None, 0)),
