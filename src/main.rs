@@ -8,11 +8,14 @@
 //! - `relume bench icache SCENE.json --anim NAME.anim.json --frames F [--vpls N] [--audit] [--json FILE]`
 //! - `relume bench particles SCENE.json [--anim NAME.anim.json --frames F] [--particles N] [--json FILE]`
 //! - `relume bench error SCENE.json [--anim NAME.anim.json --frames F --every K] --techniques LIST [--ref-spp S] [--out DIR]`
-//! - `relume load --url URL --scene NAME --anim NAME.anim.json --sessions N --hz H --duration 60s`
+//! - `relume bench fairness [--url URL] [--scene NAME] [--technique SPEC] [--hz H] [--spammers K] [--duration 15s]`
+//! - `relume load --url URL --scene NAME --anim NAME.anim.json --sessions N --hz H --duration 60s [--open-loop] [--timeout 30s]`
 //!
 //! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
 use clap::{Parser, Subcommand};
-use relume::tools::{bench, bench_error, bench_icache, bench_particles, bench_reuse, load, render, serve};
+use relume::tools::{
+    bench, bench_error, bench_fairness, bench_icache, bench_particles, bench_reuse, load, render, serve,
+};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -54,6 +57,9 @@ enum BenchCommand {
     /// Speed against error: technique configurations against converged `path` references,
     /// with CSV, JSON, a Markdown report and plots.
     Error(bench_error::ErrorArgs),
+    /// One session spamming ticks next to one ticking steadily: the steady one's latency alone
+    /// and under the spam.
+    Fairness(bench_fairness::FairnessArgs),
 }
 
 fn main() -> ExitCode {
@@ -71,6 +77,7 @@ fn main() -> ExitCode {
         Command::Bench { which: BenchCommand::Icache(args) } => bench_icache::run(args),
         Command::Bench { which: BenchCommand::Particles(args) } => bench_particles::run(args),
         Command::Bench { which: BenchCommand::Error(args) } => bench_error::run(args),
+        Command::Bench { which: BenchCommand::Fairness(args) } => bench_fairness::run(args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

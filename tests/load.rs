@@ -18,6 +18,8 @@ async fn two_sessions_for_five_seconds_lose_nothing() {
         hz: 30.0,
         duration: Duration::from_secs(5),
         technique: "path".into(),
+        open_loop: false,
+        timeout: Duration::from_secs(30),
         width: Some(64),
         height: Some(64),
         frames: "png".into(),

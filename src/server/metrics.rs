@@ -22,6 +22,10 @@ pub struct Metrics {
     pub frames_dropped: AtomicU64,
     pub edits_received: AtomicU64,
     pub edits_coalesced: AtomicU64,
+    /// Connections answered 503 for being over `--max-connections`.
+    pub connections_refused: AtomicU64,
+    /// Connections open now.
+    pub connections_open: AtomicU64,
     tick_buckets: [AtomicU64; TICK_BUCKETS.len()],
     tick_count: AtomicU64,
     encode_micros: AtomicU64,
@@ -89,6 +93,16 @@ impl Metrics {
             "edits_coalesced_total",
             "Edits replaced by a later edit to the same target.",
             get(&self.edits_coalesced),
+        );
+        counter(
+            "connections_refused_total",
+            "Connections answered 503 for being over --max-connections.",
+            get(&self.connections_refused),
+        );
+        let _ = writeln!(
+            out,
+            "# HELP relume_connections Connections open.\n# TYPE relume_connections gauge\nrelume_connections {}",
+            get(&self.connections_open)
         );
         let _ = writeln!(
             out,

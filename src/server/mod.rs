@@ -10,10 +10,12 @@
 //! log line. When a token is configured, every `/v1` route requires `Authorization: Bearer`.
 pub mod encoded;
 pub mod error;
+mod listen;
 pub mod metrics;
 pub mod protocol;
 pub mod routes;
 pub mod state;
+pub mod turns;
 pub mod worker;
 pub mod ws;
 
@@ -214,7 +216,9 @@ fn cors(origins: &[String]) -> Option<tower_http::cors::CorsLayer> {
     })
 }
 
-/// Serves `listener` until `shutdown` resolves, then stops every session.
+/// Serves `listener` until `shutdown` resolves, then stops every session. Connections and
+/// sessions drain within `Limits::drain_deadline` together; a session whose tick is still
+/// running then is left to the process's exit, with a warning.
 pub async fn run(
     listener: tokio::net::TcpListener,
     state: Arc<AppState>,
@@ -226,10 +230,21 @@ pub async fn run(
         shutdown.await;
         closing.send_replace(true);
     };
-    axum::serve(listener, app(state.clone())).with_graceful_shutdown(signal).await?;
+    let limits = state.config.limits.clone();
+    let left = listen::serve(listener, app(state.clone()), &limits, state.metrics.clone(), signal).await;
     let drained = state.clone();
-    tokio::task::spawn_blocking(move || drained.drain_blocking()).await.map_err(std::io::Error::other)?;
-    tracing::info!(target: "relume::server", "shut down; all sessions drained");
+    let drain = tokio::task::spawn_blocking(move || drained.drain_blocking());
+    match tokio::time::timeout(left, drain).await {
+        Ok(joined) => {
+            joined.map_err(std::io::Error::other)?;
+            tracing::info!(target: "relume::server", "shut down; all sessions drained");
+        }
+        Err(_) => tracing::warn!(
+            target: "relume::server",
+            "shut down with sessions still ticking after the {:?} drain deadline",
+            limits.drain_deadline
+        ),
+    }
     Ok(())
 }
 

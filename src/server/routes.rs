@@ -212,7 +212,12 @@ pub async fn get_frame(
                 "no frame yet: POST .../tick first, or ask for ?tick=0 to wait for the first one",
             ))
         }
-        Ok(Err(_)) => return Err(ApiError::new(StatusCode::GONE, "session_closed", "the session has shut down")),
+        Ok(Err(_)) => {
+            return Err(match entry.handle.failure() {
+                Some(reason) => super::worker::failed(&reason),
+                None => ApiError::new(StatusCode::GONE, "session_closed", "the session has shut down"),
+            })
+        }
         Err(_) => {
             return Err(ApiError::new(
                 StatusCode::REQUEST_TIMEOUT,

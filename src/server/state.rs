@@ -2,7 +2,7 @@
 use super::error::ApiError;
 use super::metrics::Metrics;
 use super::protocol::{CreateSession, SceneEntry, SessionLinks, SessionView};
-use super::worker::SessionHandle;
+use super::worker::{SessionHandle, WorkerContext};
 use crate::embree::Device;
 use crate::engine::Session;
 use crate::film::{DenoiseError, DenoiseSettings};
@@ -43,6 +43,13 @@ pub struct Limits {
     /// How long `GET frame?tick=N` waits for tick N.
     pub frame_wait: Duration,
     pub request_timeout: Duration,
+    /// Open HTTP connections, and open WebSockets, each at most this many; past it, a new
+    /// connection or upgrade gets 503.
+    pub max_connections: usize,
+    /// A connection must send a request's headers within this long (slow-loris).
+    pub header_read_timeout: Duration,
+    /// How long shutdown waits for connections and sessions to drain.
+    pub drain_deadline: Duration,
 }
 
 impl Limits {
@@ -94,6 +101,9 @@ impl Default for Limits {
             session_idle: Duration::from_secs(600),
             frame_wait: Duration::from_secs(10),
             request_timeout: Duration::from_secs(60),
+            max_connections: 512,
+            header_read_timeout: Duration::from_secs(10),
+            drain_deadline: Duration::from_secs(30),
         }
     }
 }
@@ -136,7 +146,7 @@ pub struct SessionEntry {
     /// Milliseconds after the server's start of the last request or WebSocket message.
     last_active: AtomicU64,
     pub handle: SessionHandle,
-    /// Its place in the session count and the memory budget, released when the entry drops.
+    /// Its place in the session count, released when the entry drops.
     _reservation: Reservation,
 }
 
@@ -147,17 +157,16 @@ struct Reserved {
     bytes: u64,
 }
 
-/// A session's share of [`Reserved`], taken before its scene is loaded (so concurrent
-/// creations cannot exceed `max_sessions`) and returned on drop, whether the creation failed
-/// or the session was deleted.
+/// A session's place among `max_sessions`, taken before its scene is loaded (so concurrent
+/// creations cannot exceed the limit) and given back on drop, whether the creation failed or
+/// the session was deleted.
 pub struct Reservation {
     table: Arc<std::sync::Mutex<Reserved>>,
-    bytes: u64,
 }
 
 impl Reservation {
-    /// Adds `bytes` to this reservation unless the server's total would exceed `limit`.
-    fn add_bytes(&mut self, bytes: u64, limit: u64) -> Result<(), ApiError> {
+    /// Reserves `bytes` of the server's memory budget unless its total would exceed `limit`.
+    fn memory(&self, bytes: u64, limit: u64) -> Result<MemoryReservation, ApiError> {
         let mut r = self.table.lock().map_err(|_| ApiError::internal("reservation lock poisoned"))?;
         if r.bytes.saturating_add(bytes) > limit {
             return Err(ApiError::new(
@@ -172,8 +181,7 @@ impl Reservation {
             ));
         }
         r.bytes += bytes;
-        self.bytes += bytes;
-        Ok(())
+        Ok(MemoryReservation { table: self.table.clone(), bytes })
     }
 }
 
@@ -181,6 +189,20 @@ impl Drop for Reservation {
     fn drop(&mut self) {
         if let Ok(mut r) = self.table.lock() {
             r.sessions -= 1;
+        }
+    }
+}
+
+/// A session's estimated bytes in the server's memory budget. Its worker holds it with the
+/// session, so the bytes come back when the session fails, not only when it is deleted.
+pub struct MemoryReservation {
+    table: Arc<std::sync::Mutex<Reserved>>,
+    bytes: u64,
+}
+
+impl Drop for MemoryReservation {
+    fn drop(&mut self) {
+        if let Ok(mut r) = self.table.lock() {
             r.bytes -= self.bytes;
         }
     }
@@ -191,6 +213,11 @@ pub struct AppState {
     pub metrics: Arc<Metrics>,
     pub device: Device,
     pub pool: Arc<rayon::ThreadPool>,
+    /// Round-robin turns on the pool for every session's ticks.
+    pub turns: Arc<super::turns::Turns>,
+    /// Open WebSockets, at most `max_connections` (an upgraded socket has left hyper's
+    /// connection count).
+    pub sockets: Arc<tokio::sync::Semaphore>,
     pub sessions: RwLock<HashMap<String, Arc<SessionEntry>>>,
     reserved: Arc<std::sync::Mutex<Reserved>>,
     next_id: AtomicU64,
@@ -210,11 +237,14 @@ impl AppState {
         let pool = Arc::new(crate::engine::thread_pool(config.threads)?);
         let device = Device::with_isa(config.threads, config.isa)?;
         let (shutting_down, _) = tokio::sync::watch::channel(false);
+        let sockets = config.limits.max_connections;
         Ok(AppState {
             config,
             metrics: Arc::new(Metrics::default()),
             device,
             pool,
+            turns: Arc::default(),
+            sockets: Arc::new(tokio::sync::Semaphore::new(sockets)),
             sessions: RwLock::new(HashMap::new()),
             reserved: Arc::default(),
             next_id: AtomicU64::new(1),
@@ -267,6 +297,11 @@ impl AppState {
         expired
     }
 
+    /// Bytes the live sessions hold in the server's memory budget (their estimates).
+    pub fn reserved_bytes(&self) -> u64 {
+        self.reserved.lock().map(|r| r.bytes).unwrap_or(0)
+    }
+
     pub fn session_count(&self) -> usize {
         self.sessions.read().map(|s| s.len()).unwrap_or(0)
     }
@@ -301,7 +336,7 @@ impl AppState {
     /// `spawn_blocking`.
     pub fn create_session(&self, req: CreateSession) -> Result<SessionView, ApiError> {
         let limits = &self.config.limits;
-        let mut reservation = self.reserve_session()?;
+        let reservation = self.reserve_session()?;
         // The scene: a bundled name or an inline document confined to the scenes root.
         let root = &self.config.scenes_root;
         let (scene_name, scene_dir, mut scene) = match &req.scene {
@@ -364,7 +399,7 @@ impl AppState {
         }
 
         let memory_bytes = self.check_memory(&technique, req.denoise, &scene, u64::from(w) * u64::from(h))?;
-        reservation.add_bytes(memory_bytes, limits.server_memory)?;
+        let memory = reservation.memory(memory_bytes, limits.server_memory)?;
         let mut session = Session::new(scene, &technique, req.seed, &self.device).map_err(|e| match e {
             crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
                 ApiError::invalid(format!("technique: {t}"))
@@ -384,7 +419,13 @@ impl AppState {
             .map(|d| d.as_nanos() as u64)
             .unwrap_or(0);
         let id = format!("s{n}-{:08x}", crate::core::rng::mix64(salt ^ n) as u32);
-        let handle = SessionHandle::spawn(&id, session, req.tick_hz, self.pool.clone(), self.metrics.clone())
+        let context = WorkerContext {
+            pool: self.pool.clone(),
+            turns: self.turns.clone(),
+            metrics: self.metrics.clone(),
+            max_tick_hz: limits.max_tick_hz,
+        };
+        let handle = SessionHandle::spawn(&id, session, memory, req.tick_hz, context)
             .map_err(|e| ApiError::internal(format!("cannot start the session thread: {e}")))?;
         let entry = Arc::new(SessionEntry {
             id: id.clone(),
@@ -420,7 +461,7 @@ impl AppState {
             ));
         }
         r.sessions += 1;
-        Ok(Reservation { table: self.reserved.clone(), bytes: 0 })
+        Ok(Reservation { table: self.reserved.clone() })
     }
 
     /// The session's estimated resident bytes (technique and film), refused with 413 naming
@@ -507,5 +548,65 @@ pub fn view(e: &SessionEntry) -> SessionView {
         failure,
         last_stats,
         links: links(&e.id),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::time::Instant;
+
+    fn state(limits: Limits) -> AppState {
+        let scenes_root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+        let config = ServerConfig {
+            scenes_root: scenes_root.canonicalize().expect("scenes folder"),
+            token: None,
+            threads: 2,
+            isa: None,
+            limits,
+            access: Access::default(),
+        };
+        AppState::new(config).expect("server state")
+    }
+
+    fn photon_session() -> CreateSession {
+        serde_json::from_value(serde_json::json!({
+            "scene": "cornell-box", "width": 16, "height": 16,
+            "technique": {"id": "photon_reuse", "paths": 20000}
+        }))
+        .expect("request")
+    }
+
+    /// Hazard: a failed session kept its technique's memory, and its share of
+    /// `--server-memory`, until a client deleted it.
+    #[test]
+    fn a_failed_session_gives_back_its_memory_before_it_is_deleted() {
+        let s = state(Limits::default());
+        let view = s.create_session(photon_session()).expect("created");
+        let held = s.reserved_bytes();
+        assert!(held > 0, "a photon_reuse session reserves its estimate");
+        let entry = s.session(&view.id).expect("listed");
+        let mut frames = entry.handle.frames.clone();
+        entry.handle.inject_panic().expect("queued");
+        let deadline = Instant::now() + Duration::from_secs(30);
+        while s.reserved_bytes() != 0 && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        assert_eq!(s.reserved_bytes(), 0, "the failed session still holds its {held} bytes");
+        // Still inspectable, as failed, with its reason.
+        let failed = view_of(&s, &view.id);
+        assert_eq!(failed.state, "failed");
+        assert!(failed.failure.unwrap_or_default().contains("injected by a test"));
+        // Its frame channel is closed: WebSocket subscribers get CLOSE_SESSION_FAILED.
+        let runtime = tokio::runtime::Builder::new_current_thread().build().expect("runtime");
+        assert!(runtime.block_on(frames.changed()).is_err(), "the frame publisher outlived the failure");
+        // The session's place is still taken until it is deleted.
+        assert_eq!(s.session_count(), 1);
+        s.remove_session_blocking(&view.id).expect("deleted");
+        assert_eq!(s.session_count(), 0);
+    }
+
+    fn view_of(s: &AppState, id: &str) -> SessionView {
+        view(&s.session(id).expect("listed"))
     }
 }

@@ -10,9 +10,20 @@
 //! tick's frame is published through a `watch` channel (newest frame wins) and its stats are
 //! kept in a bounded history. A panic inside a tick marks the session failed with the panic's
 //! message; the process and the other sessions carry on.
+//!
+//! Fairness: every tick runs in a turn on the shared pool ([`Turns`], round-robin across
+//! sessions), and client-driven ticks of one session run at most `max_tick_hz` times a second
+//! (a request that comes sooner is answered by the tick at the next allowed instant).
+//!
+//! A failed session drops its technique, its film and its frame publisher at once, so its
+//! memory (and its share of `--server-memory`) is free before a client deletes it; WebSocket
+//! subscribers are closed with [`super::ws::CLOSE_SESSION_FAILED`]. Its entry, failure reason
+//! and stats history stay inspectable until it is deleted.
 use super::error::ApiError;
 use super::metrics::Metrics;
 use super::protocol::EditsAccepted;
+use super::state::MemoryReservation;
+use super::turns::Turns;
 use crate::engine::{Session, TickStats};
 use crate::scene::animation::Animation;
 use crate::scene::edits::Edit;
@@ -58,9 +69,12 @@ pub enum Command {
     Pause,
     /// The current scene description (edits applied).
     Scene {
-        reply: oneshot::Sender<crate::scene::SceneDesc>,
+        reply: oneshot::Sender<Result<crate::scene::SceneDesc, ApiError>>,
     },
     Shutdown,
+    /// Panics inside a tick's turn, as a failing technique would (tests of the failure path).
+    #[cfg(test)]
+    Panic,
 }
 
 /// The handle the server keeps for a session.
@@ -75,7 +89,8 @@ pub struct SessionHandle {
     thread: Mutex<Option<JoinHandle<()>>>,
 }
 
-fn failed(reason: &str) -> ApiError {
+/// 409: the session failed earlier.
+pub fn failed(reason: &str) -> ApiError {
     ApiError::new(
         StatusCode::CONFLICT,
         "session_failed",
@@ -87,82 +102,146 @@ fn gone() -> ApiError {
     ApiError::new(StatusCode::GONE, "session_closed", "the session has shut down")
 }
 
-struct Worker {
+/// What a running session holds; dropped whole when the session fails.
+struct Live {
     session: Session,
-    pool: Arc<rayon::ThreadPool>,
-    metrics: Arc<Metrics>,
     publish: watch::Sender<Option<Arc<PublishedFrame>>>,
+    /// The session's share of `--server-memory`, given back when it fails or is deleted.
+    _memory: MemoryReservation,
+}
+
+/// What the worker needs from the server to run a session.
+pub struct WorkerContext {
+    pub pool: Arc<rayon::ThreadPool>,
+    pub turns: Arc<Turns>,
+    pub metrics: Arc<Metrics>,
+    /// Client-driven ticks run at most this often (the server's `max_tick_hz`).
+    pub max_tick_hz: f32,
+}
+
+struct Worker {
+    live: Option<Live>,
+    context: WorkerContext,
     history: Arc<Mutex<VecDeque<TickStats>>>,
     failure: Arc<Mutex<Option<String>>>,
     tick_waiters: TickWaiters,
+    /// When the last tick started.
+    last_tick: Option<Instant>,
 }
 
 impl Worker {
-    /// Runs the queued tick and answers everyone who asked for it.
+    /// Runs a tick for the clients waiting for one, if any are (a scheduled tick may have
+    /// answered them already), and answers them all.
     fn tick_for_waiters(&mut self) {
         let waiters = self.tick_waiters.lock().map(|mut w| std::mem::take(&mut *w)).unwrap_or_default();
+        if waiters.is_empty() {
+            return;
+        }
         let result = self.tick();
         for reply in waiters {
             let _ = reply.send(result.clone());
         }
     }
 
+    /// A scheduled tick; clients waiting for a tick get its stats too.
+    fn scheduled_tick(&mut self) -> Result<TickStats, ApiError> {
+        let waiters = self.tick_waiters.lock().map(|mut w| std::mem::take(&mut *w)).unwrap_or_default();
+        let result = self.tick();
+        for reply in waiters {
+            let _ = reply.send(result.clone());
+        }
+        result
+    }
+
+    /// When a client-driven tick asked for now may run: at least `1 / max_tick_hz` after the
+    /// last tick started.
+    fn client_tick_due(&self) -> Instant {
+        let period = Duration::try_from_secs_f32(1.0 / self.context.max_tick_hz).unwrap_or(MAX_PERIOD);
+        let now = Instant::now();
+        self.last_tick.map_or(now, |t| (t + period).max(now))
+    }
+
+    fn live(&mut self) -> Result<&mut Live, ApiError> {
+        let reason = self.failure();
+        self.live.as_mut().ok_or_else(|| failed(&reason.unwrap_or_default()))
+    }
+
     fn failure(&self) -> Option<String> {
         self.failure.lock().ok().and_then(|f| f.clone())
     }
 
-    fn queue(&mut self, batch: Vec<Edit>) -> Result<EditsAccepted, ApiError> {
-        if let Some(reason) = self.failure() {
-            return Err(failed(&reason));
+    /// Marks the session failed and drops what it holds: technique, film, frame publisher (its
+    /// subscribers see the channel close) and its memory reservation.
+    fn fail(&mut self, reason: String) {
+        tracing::error!(target: "relume::server", "session failed: {reason}");
+        self.context.metrics.sessions_failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        if let Ok(mut f) = self.failure.lock() {
+            *f = Some(reason);
         }
-        let queued = batch.len();
-        let seq = self.session.queue_edits(batch)?;
-        Ok(EditsAccepted { queued, pending: self.session.pending_edits(), seq })
+        self.live = None;
     }
 
-    /// Runs one tick, catching panics; on success publishes the frame.
+    fn queue(&mut self, batch: Vec<Edit>) -> Result<EditsAccepted, ApiError> {
+        let session = &mut self.live()?.session;
+        let queued = batch.len();
+        let seq = session.queue_edits(batch)?;
+        Ok(EditsAccepted { queued, pending: session.pending_edits(), seq })
+    }
+
+    /// Runs one tick in this session's turn on the pool, catching panics; on success publishes
+    /// the frame, on failure fails the session.
     fn tick(&mut self) -> Result<TickStats, ApiError> {
-        if let Some(reason) = self.failure() {
-            return Err(failed(&reason));
-        }
-        let session = &mut self.session;
-        let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| self.pool.install(|| session.tick())));
+        self.last_tick = Some(Instant::now());
+        let WorkerContext { pool, turns, .. } = &self.context;
+        let (pool, turns) = (pool.clone(), turns.clone());
+        let live = self.live()?;
+        let session = &mut live.session;
+        let outcome = turns.run(|| std::panic::catch_unwind(AssertUnwindSafe(|| pool.install(|| session.tick()))));
         let reason = match outcome {
             Ok(Ok(frame)) => {
                 let stats = frame.stats.clone();
-                self.metrics.observe_tick(stats.times.total_ms / 1e3, stats.rays.total());
-                self.metrics
-                    .edits_coalesced
-                    .fetch_add(stats.edits_coalesced as u64, std::sync::atomic::Ordering::Relaxed);
-                if let Ok(mut h) = self.history.lock() {
-                    if h.len() == STATS_HISTORY {
-                        h.pop_front();
-                    }
-                    h.push_back(stats.clone());
-                }
-                self.publish.send_replace(Some(Arc::new(frame)));
+                live.publish.send_replace(Some(Arc::new(frame)));
+                self.record(&stats);
                 return Ok(stats);
             }
             Ok(Err(e)) => format!("tick failed: {e}"),
             Err(panic) => format!("panic in the technique: {}", panic_message(&*panic)),
         };
-        tracing::error!(target: "relume::server", "session failed: {reason}");
-        self.metrics.sessions_failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        if let Ok(mut f) = self.failure.lock() {
-            *f = Some(reason.clone());
-        }
+        self.fail(reason.clone());
         Err(ApiError::internal(reason))
+    }
+
+    fn record(&self, stats: &TickStats) {
+        let metrics = &self.context.metrics;
+        metrics.observe_tick(stats.times.total_ms / 1e3, stats.rays.total());
+        metrics.edits_coalesced.fetch_add(stats.edits_coalesced as u64, std::sync::atomic::Ordering::Relaxed);
+        if let Ok(mut h) = self.history.lock() {
+            if h.len() == STATS_HISTORY {
+                h.pop_front();
+            }
+            h.push_back(stats.clone());
+        }
+    }
+
+    /// A test's stand-in for a technique that panics: the same path as a real panic in a tick.
+    #[cfg(test)]
+    fn panic_in_a_turn(&mut self) {
+        let turns = self.context.turns.clone();
+        let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| turns.run(|| panic!("injected by a test"))));
+        if let Err(panic) = outcome {
+            self.fail(format!("panic in the technique: {}", panic_message(&*panic)));
+        }
     }
 }
 
 impl SessionHandle {
-    /// Starts the worker thread for `session`.
+    /// Starts the worker thread for `session`, which holds `memory` of the server's budget.
     pub fn spawn(
         id: &str,
         session: Session,
+        memory: MemoryReservation,
         tick_hz: Option<f32>,
-        pool: Arc<rayon::ThreadPool>,
-        metrics: Arc<Metrics>,
+        context: WorkerContext,
     ) -> std::io::Result<SessionHandle> {
         let (tx, rx) = mpsc::sync_channel(COMMAND_QUEUE);
         let (publish, frames) = watch::channel(None);
@@ -170,13 +249,12 @@ impl SessionHandle {
         let failure = Arc::new(Mutex::new(None));
         let tick_waiters = TickWaiters::default();
         let worker = Worker {
-            session,
-            pool,
-            metrics,
-            publish,
+            live: Some(Live { session, publish, _memory: memory }),
+            context,
             history: history.clone(),
             failure: failure.clone(),
             tick_waiters: tick_waiters.clone(),
+            last_tick: None,
         };
         let thread =
             std::thread::Builder::new().name(format!("session-{id}")).spawn(move || run(worker, rx, tick_hz))?;
@@ -217,6 +295,9 @@ impl SessionHandle {
     /// Asks for a tick: joins the queued one if there is one (it has not started, so it will
     /// include everything this client sent before), else queues a new one.
     pub async fn tick(&self) -> Result<TickStats, ApiError> {
+        if let Some(reason) = self.failure() {
+            return Err(failed(&reason));
+        }
         let (reply, answer) = oneshot::channel();
         {
             let mut waiters = self.tick_waiters.lock().map_err(|_| gone())?;
@@ -241,7 +322,13 @@ impl SessionHandle {
     pub async fn scene(&self) -> Result<crate::scene::SceneDesc, ApiError> {
         let (reply, answer) = oneshot::channel();
         self.send(Command::Scene { reply })?;
-        answer.await.map_err(|_| gone())
+        answer.await.map_err(|_| gone())?
+    }
+
+    /// Makes the session's next command panic inside a turn (tests of the failure path).
+    #[cfg(test)]
+    pub fn inject_panic(&self) -> Result<(), ApiError> {
+        self.send(Command::Panic)
     }
 
     pub fn pause(&self) -> Result<(), ApiError> {
@@ -266,7 +353,7 @@ impl SessionHandle {
 /// "running" with no thread behind it.
 fn run(w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
     let failure = w.failure.clone();
-    let metrics = w.metrics.clone();
+    let metrics = w.context.metrics.clone();
     if let Err(panic) = std::panic::catch_unwind(AssertUnwindSafe(|| serve(w, rx, tick_hz))) {
         let reason = format!("panic in the session worker: {}", panic_message(&*panic));
         tracing::error!(target: "relume::server", "session failed: {reason}");
@@ -285,55 +372,84 @@ fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
         .unwrap_or_else(|| "(no message)".into())
 }
 
+/// What woke the command loop.
+enum Wake {
+    Command(Command),
+    /// The scheduled tick (`tick_hz`, or a playing animation) is due.
+    Scheduled,
+    /// A client-driven tick held back by the rate cap is due.
+    ClientTick,
+}
+
+/// Waits for a command, or until the earlier of the two deadlines. `None`: the server is gone.
+fn wait(rx: &mpsc::Receiver<Command>, next_tick: Option<Instant>, client_tick: Option<Instant>) -> Option<Wake> {
+    let deadline = match (next_tick, client_tick) {
+        (Some(a), Some(b)) => Some(a.min(b)),
+        (a, b) => a.or(b),
+    };
+    let Some(at) = deadline else { return rx.recv().ok().map(Wake::Command) };
+    match rx.recv_timeout(at.saturating_duration_since(Instant::now())) {
+        Ok(c) => Some(Wake::Command(c)),
+        Err(RecvTimeoutError::Timeout) if client_tick == Some(at) => Some(Wake::ClientTick),
+        Err(RecvTimeoutError::Timeout) => Some(Wake::Scheduled),
+        Err(RecvTimeoutError::Disconnected) => None,
+    }
+}
+
 /// The command loop: serve commands; tick on schedule while `tick_hz` is set or an animation
-/// plays.
+/// plays, and for clients no sooner than the rate cap allows.
 fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
     let mut playing: Option<(Box<Animation>, f32, Instant)> = None;
     let mut next_tick = tick_hz.map(|_| Instant::now());
-    loop {
-        let command = match next_tick {
-            Some(at) => match rx.recv_timeout(at.saturating_duration_since(Instant::now())) {
-                Ok(c) => Some(c),
-                Err(RecvTimeoutError::Timeout) => None,
-                Err(RecvTimeoutError::Disconnected) => break,
-            },
-            None => match rx.recv() {
-                Ok(c) => Some(c),
-                Err(_) => break,
-            },
-        };
-        match command {
-            Some(Command::Edits { batch, reply }) => {
+    let mut client_tick: Option<Instant> = None;
+    while let Some(wake) = wait(&rx, next_tick, client_tick) {
+        match wake {
+            Wake::Command(Command::Edits { batch, reply }) => {
                 let _ = reply.send(w.queue(batch));
             }
-            Some(Command::Tick) => w.tick_for_waiters(),
-            Some(Command::Play { anim, speed, reply }) => {
-                let checked = anim.validate(w.session.scene()).map_err(|e| ApiError::invalid(format!("anim: {e}")));
+            Wake::Command(Command::Tick) => {
+                let due = w.client_tick_due();
+                if due <= Instant::now() {
+                    w.tick_for_waiters();
+                } else {
+                    client_tick = Some(due);
+                }
+            }
+            Wake::ClientTick => {
+                client_tick = None;
+                w.tick_for_waiters();
+            }
+            Wake::Command(Command::Play { anim, speed, reply }) => {
+                let checked = w.live().and_then(|l| {
+                    anim.validate(l.session.scene()).map_err(|e| ApiError::invalid(format!("anim: {e}")))
+                });
                 if checked.is_ok() {
                     playing = Some((anim, speed, Instant::now()));
                     next_tick.get_or_insert_with(Instant::now);
                 }
                 let _ = reply.send(checked);
             }
-            Some(Command::Pause) => {
+            Wake::Command(Command::Pause) => {
                 playing = None;
                 if tick_hz.is_none() {
                     next_tick = None;
                 }
             }
-            Some(Command::Scene { reply }) => {
-                let _ = reply.send(w.session.scene().desc().clone());
+            Wake::Command(Command::Scene { reply }) => {
+                let _ = reply.send(w.live().map(|l| l.session.scene().desc().clone()));
             }
-            Some(Command::Shutdown) => break,
-            None => {
-                // A scheduled tick: advance the animation, then tick.
+            Wake::Command(Command::Shutdown) => break,
+            #[cfg(test)]
+            Wake::Command(Command::Panic) => w.panic_in_a_turn(),
+            Wake::Scheduled => {
+                // Advance the animation, then tick.
                 if let Some((anim, speed, started)) = &playing {
                     let t = started.elapsed().as_secs_f32() * speed;
                     if w.queue(anim.edits_at(t)).is_err() {
                         playing = None;
                     }
                 }
-                if w.tick().is_err() {
+                if w.scheduled_tick().is_err() {
                     next_tick = None;
                     playing = None;
                     continue;

@@ -25,6 +25,11 @@ use std::sync::Arc;
 /// socket is open; the reason is a JSON `{error, detail}`.
 pub const CLOSE_SESSION_GONE: u16 = 4410;
 
+/// Close code sent when the session fails (a panic or an error inside a tick); the reason is a
+/// JSON `{error: "session_failed", detail}` with the failure. The session stays inspectable over
+/// HTTP until it is deleted.
+pub const CLOSE_SESSION_FAILED: u16 = 4409;
+
 /// How often the server pings an open socket; a pong counts as activity, so an open viewer
 /// keeps its session from expiring.
 const PING_EVERY: std::time::Duration = std::time::Duration::from_secs(30);
@@ -37,9 +42,20 @@ pub async fn upgrade(
 ) -> Result<Response, ApiError> {
     check_origin(&s, &headers)?;
     let entry = s.session(&id)?;
+    let max = s.config.limits.max_connections;
+    let permit = s.sockets.clone().try_acquire_owned().map_err(|_| {
+        ApiError::new(
+            axum::http::StatusCode::SERVICE_UNAVAILABLE,
+            "too_many_connections",
+            format!("the server holds its maximum of {max} WebSockets (--max-connections); retry later"),
+        )
+    })?;
     // One size limit for HTTP bodies and WebSocket messages (the library's default is 64 MiB).
     let limit = s.config.limits.max_body_bytes;
-    Ok(ws.max_message_size(limit).max_frame_size(limit).on_upgrade(move |socket| serve(socket, s, entry)))
+    Ok(ws.max_message_size(limit).max_frame_size(limit).on_upgrade(move |socket| async move {
+        serve(socket, s, entry).await;
+        drop(permit);
+    }))
 }
 
 /// A browser's upgrade must come from the page's own origin (its authority equals `Host`) or
@@ -112,8 +128,11 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
             }
             changed = frames.changed() => {
                 if changed.is_err() {
-                    let detail = format!("session {} was deleted (by a client, or idle for longer than --session-idle)", entry.id);
-                    let _ = socket.send(close(CLOSE_SESSION_GONE, "session_closed", &detail)).await;
+                    let message = match entry.handle.failure() {
+                        Some(reason) => close(CLOSE_SESSION_FAILED, "session_failed", &format!("session {} failed: {reason}", entry.id)),
+                        None => close(CLOSE_SESSION_GONE, "session_closed", &format!("session {} was deleted (by a client, or idle for longer than --session-idle)", entry.id)),
+                    };
+                    let _ = socket.send(message).await;
                     break;
                 }
                 let Some(frame) = frames.borrow_and_update().clone() else { continue };

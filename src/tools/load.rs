@@ -8,7 +8,19 @@
 //! the server's own numbers: each accepted batch's sequence number (`edits_accepted.seq`)
 //! against the last tick's `edits_applied_through`, plus any batch never acknowledged.
 //!
-//! Latency is measured from sending a period's edits and tick to receiving that tick's frame.
+//! Two ways to pace the stream:
+//! - **closed loop** (default): a period sends a `tick` only when the last one has come back,
+//!   and latency is measured from sending a tick to receiving its frame;
+//! - **open loop** (`--open-loop`): every period sends its edits and a `tick` on a fixed
+//!   schedule, whatever is in flight, and latency runs from the period's *scheduled* time to the
+//!   first frame whose tick applied that period's edits (`edits_applied_through` ≥ the batch's
+//!   `seq`). A slow tick then delays every period behind it and is counted as such, instead of
+//!   slowing the client down and hiding itself (coordinated omission).
+//!
+//! Every wait has a bound (`--timeout`): connecting, each HTTP request, each WebSocket send,
+//! each tick (or each period's edits, open loop) awaiting its frame, and the final drain. An
+//! `error` message from the server ends the tick it answers, so a failing session cannot wedge
+//! the run.
 use super::UsageError;
 use crate::scene::animation::Animation;
 use crate::server::protocol::{ClientMessage, FrameFormat, FrameHeader, ServerMessage};
@@ -16,8 +28,10 @@ use crate::technique::TechniqueConfig;
 use anyhow::{Context, Result};
 use futures_util::{SinkExt, StreamExt};
 use serde::Serialize;
+use std::collections::VecDeque;
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
+use tokio::time::Instant;
 use tokio_tungstenite::tungstenite::Message;
 
 #[derive(clap::Args, Debug, Clone)]
@@ -39,9 +53,17 @@ pub struct LoadArgs {
     /// How long to stream, e.g. 60s, 500ms, 2m.
     #[arg(long, default_value = "60s", value_parser = humantime::parse_duration)]
     pub duration: Duration,
-    /// Technique: an id (`path`) or a JSON TechniqueConfig.
+    /// Technique: a spec as `render` and `bench error` take it (`photon_reuse:naive:paths=200000`)
+    /// or a JSON TechniqueConfig.
     #[arg(long, default_value = "path")]
     pub technique: String,
+    /// Send every period's edits and tick on schedule, measuring latency from the scheduled
+    /// time (see the module doc).
+    #[arg(long)]
+    pub open_loop: bool,
+    /// The longest any request, send or tick may take before it counts as an error.
+    #[arg(long, default_value = "30s", value_parser = humantime::parse_duration)]
+    pub timeout: Duration,
     #[arg(long)]
     pub width: Option<u32>,
     #[arg(long)]
@@ -90,6 +112,7 @@ pub struct LoadReport {
     pub scene: String,
     pub sessions: usize,
     pub hz: f64,
+    pub open_loop: bool,
     pub duration_s: f64,
     pub ticks_per_second: f64,
     pub latency_p50_ms: f64,
@@ -111,7 +134,8 @@ pub struct LoadReport {
     pub encode_to_tick_ratio: f64,
 }
 
-fn percentile(sorted: &[f64], p: f64) -> f64 {
+/// The `p`th percentile of sorted values (nearest rank).
+pub fn percentile(sorted: &[f64], p: f64) -> f64 {
     if sorted.is_empty() {
         return 0.0;
     }
@@ -119,12 +143,12 @@ fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[rank.min(sorted.len() - 1)]
 }
 
-fn technique(spec: &str) -> Result<TechniqueConfig> {
+/// A technique spec or JSON configuration, as `--technique` takes it.
+pub fn technique(spec: &str) -> Result<TechniqueConfig> {
     if spec.trim_start().starts_with('{') {
         serde_json::from_str(spec).map_err(|e| UsageError(format!("--technique: {e}")).into())
     } else {
-        let json = format!("{{\"id\": {}}}", serde_json::Value::String(spec.to_string()));
-        serde_json::from_str(&json).map_err(|e| UsageError(format!("--technique '{spec}': {e}")).into())
+        TechniqueConfig::from_spec(spec).map_err(|e| UsageError(format!("--technique '{spec}': {e}")).into())
     }
 }
 
@@ -162,7 +186,7 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
             format!("Bearer {t}").parse().context("token is not a valid header value")?,
         );
     }
-    let http = reqwest::Client::builder().default_headers(headers).build()?;
+    let http = reqwest::Client::builder().default_headers(headers).timeout(args.timeout).build()?;
     let (rss_start, encode_start, tick_start) = server_figures(&http, &base).await;
 
     // Create the sessions first, so every stream starts together.
@@ -194,7 +218,8 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
                 Some(t) => format!("{ws_base}/v1/sessions/{id}/ws?token={t}"),
                 None => format!("{ws_base}/v1/sessions/{id}/ws"),
             };
-            tokio::spawn(drive(url, anim.clone(), args.hz, args.duration, frames))
+            let pace = Pace { hz: args.hz, duration: args.duration, open_loop: args.open_loop, timeout: args.timeout };
+            tokio::spawn(drive(url, anim.clone(), pace, frames))
         })
         .collect();
     let mut reports = Vec::new();
@@ -218,6 +243,7 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         scene: args.scene.clone(),
         sessions: args.sessions,
         hz: args.hz,
+        open_loop: args.open_loop,
         duration_s: elapsed,
         ticks_per_second: sum(|r| r.ticks) as f64 / elapsed,
         latency_p50_ms: percentile(&lat, 50.0),
@@ -242,130 +268,255 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
     })
 }
 
+/// How a session's stream is paced and bounded.
+#[derive(Clone, Copy, Debug)]
+struct Pace {
+    hz: f64,
+    duration: Duration,
+    open_loop: bool,
+    timeout: Duration,
+}
+
 /// Where a session's stream is.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Phase {
-    /// Sending edits every period, a tick whenever none is in flight.
+    /// Sending edits every period, and ticks as the pace says.
     Streaming,
-    /// Time is up: waiting for the tick in flight, then one last tick drains queued edits.
-    Draining { drain_tick_sent: bool },
+    /// Time is up: one last tick drains the queued edits; waiting for what is in flight.
+    Draining { drain_tick_sent: bool, until: Instant },
 }
 
-/// One session's stream.
-async fn drive(url: String, anim: Animation, hz: f64, duration: Duration, frames: FrameFormat) -> SessionReport {
+type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
+
+/// One session's stream over its WebSocket.
+struct Stream {
+    ws: Socket,
+    pace: Pace,
+    ledger: Ledger,
+}
+
+/// What a stream has sent and is waiting for, and its report.
+#[derive(Default)]
+struct Ledger {
+    report: SessionReport,
+    /// Without frames, a tick is done at its stats message; with frames, at its frame.
+    stats_only: bool,
+    /// Closed loop: when the tick in flight was sent.
+    in_flight: Option<Instant>,
+    /// Open loop: scheduled times of the periods whose edits await their acknowledgement.
+    unacknowledged: VecDeque<Instant>,
+    /// Open loop: (seq, scheduled time) of acknowledged periods awaiting the frame that applies them.
+    unapplied: VecDeque<(u64, Instant)>,
+    /// `edits_applied_through` of the stats whose frame has not arrived yet.
+    applied_pending: Option<u64>,
+}
+
+/// One session's stream: connects, subscribes, streams for the duration, drains.
+async fn drive(url: String, anim: Animation, pace: Pace, frames: FrameFormat) -> SessionReport {
     let mut report = SessionReport::default();
-    let (mut ws, _) = match tokio_tungstenite::connect_async(&url).await {
-        Ok(c) => c,
-        Err(e) => {
+    let ws = match tokio::time::timeout(pace.timeout, tokio_tungstenite::connect_async(&url)).await {
+        Ok(Ok((ws, _))) => ws,
+        Ok(Err(e)) => {
             report.errors.push(format!("websocket: {e}"));
             return report;
         }
+        Err(_) => {
+            report.errors.push(format!("websocket: no connection within {:?}", pace.timeout));
+            return report;
+        }
     };
-    let text = |m: &ClientMessage| Message::Text(serde_json::to_string(m).unwrap_or_default().into());
-    if ws.send(text(&ClientMessage::Subscribe { frames, stats: true, every: 1, denoised: true })).await.is_err() {
-        report.errors.push("websocket closed before streaming".into());
-        return report;
+    let ledger = Ledger { report, stats_only: frames == FrameFormat::None, ..Ledger::default() };
+    let mut stream = Stream { ws, pace, ledger };
+    let subscribe = ClientMessage::Subscribe { frames, stats: true, every: 1, denoised: true };
+    if stream.send(&subscribe, "subscribing").await {
+        stream.run(&anim).await;
     }
-    let period = Duration::from_secs_f64(1.0 / hz);
-    let start = tokio::time::Instant::now();
-    let end = start + duration;
-    let mut next = start;
-    let mut in_flight: Option<Instant> = None;
-    let mut phase = Phase::Streaming;
-    loop {
-        tokio::select! {
-            _ = tokio::time::sleep_until(next), if phase == Phase::Streaming => {
-                if tokio::time::Instant::now() >= end {
-                    phase = Phase::Draining { drain_tick_sent: false };
-                } else {
-                    // Stream this period's edits; tick if the last one has finished.
-                    let edits = anim.edits_at(start.elapsed().as_secs_f32());
-                    report.edits_sent += edits.len() as u64;
-                    if ws.send(text(&ClientMessage::Edits { edits })).await.is_err() {
-                        report.errors.push("websocket closed while sending edits".into());
-                        break;
-                    }
-                    if in_flight.is_none() {
-                        if ws.send(text(&ClientMessage::Tick)).await.is_err() {
-                            report.errors.push("websocket closed while sending a tick".into());
-                            break;
+    let _ = tokio::time::timeout(Duration::from_secs(1), stream.ws.close(None)).await;
+    stream.ledger.report
+}
+
+impl Stream {
+    async fn run(&mut self, anim: &Animation) {
+        let period = Duration::from_secs_f64(1.0 / self.pace.hz);
+        let start = Instant::now();
+        let end = start + self.pace.duration;
+        let mut next = start;
+        let mut phase = Phase::Streaming;
+        let mut check = tokio::time::interval((self.pace.timeout / 8).max(Duration::from_millis(10)));
+        loop {
+            tokio::select! {
+                _ = tokio::time::sleep_until(next), if phase == Phase::Streaming => {
+                    if Instant::now() >= end {
+                        phase = Phase::Draining { drain_tick_sent: false, until: Instant::now() + self.pace.timeout };
+                    } else if !self.period(anim, start, next).await {
+                        return;
+                    } else {
+                        next += period;
+                        // Closed loop: a period the client could not keep is skipped. Open loop
+                        // keeps the schedule: late periods go out at once, timed from schedule.
+                        if !self.pace.open_loop && next < Instant::now() {
+                            next = Instant::now() + period;
                         }
-                        in_flight = Some(Instant::now());
-                    }
-                    next += period;
-                    let now = tokio::time::Instant::now();
-                    if next < now {
-                        next = now + period;
                     }
                 }
+                msg = self.ws.next() => {
+                    let Some(Ok(msg)) = msg else {
+                        self.ledger.report.errors.push("websocket closed by the server".into());
+                        return;
+                    };
+                    self.ledger.receive(msg);
+                }
+                _ = check.tick() => self.ledger.expire(self.pace.timeout),
             }
-            msg = ws.next() => {
-                let Some(Ok(msg)) = msg else {
-                    report.errors.push("websocket closed by the server".into());
-                    break;
-                };
-                let tick_done = match msg {
-                    Message::Text(t) => {
-                        report.bytes += t.len() as u64;
-                        match serde_json::from_str::<ServerMessage>(&t) {
-                            Ok(ServerMessage::Stats { stats, frames_dropped }) => {
-                                report.ticks += 1;
-                                report.frames_dropped = frames_dropped;
-                                report.edits_received_by_server += stats.edits_received as u64;
-                                report.edits_coalesced += stats.edits_coalesced as u64;
-                                report.applied_through = report.applied_through.max(stats.edits_applied_through);
-                                frames == FrameFormat::None
-                            }
-                            Ok(ServerMessage::EditsAccepted { queued, seq, .. }) => {
-                                report.batches_accepted.push((seq, queued as u64));
-                                false
-                            }
-                            Ok(ServerMessage::Error { error, detail }) => {
-                                report.errors.push(format!("{error}: {detail}"));
-                                false
-                            }
-                            Err(e) => {
-                                report.errors.push(format!("unreadable message: {e}"));
-                                false
-                            }
-                        }
+            if let Phase::Draining { drain_tick_sent, until } = phase {
+                if Instant::now() > until {
+                    self.ledger
+                        .report
+                        .errors
+                        .push(format!("the last tick did not come back within {:?}", self.pace.timeout));
+                    return;
+                }
+                if drain_tick_sent && !self.ledger.waiting() {
+                    return;
+                }
+                // Closed loop waits for the tick in flight first; open loop sends at once.
+                if !drain_tick_sent && (self.pace.open_loop || self.ledger.in_flight.is_none()) {
+                    if !self.send(&ClientMessage::Tick, "draining").await {
+                        return;
                     }
-                    Message::Binary(b) => {
-                        report.bytes += b.len() as u64;
-                        let frame = FrameHeader::decode(&b).is_some();
-                        report.frames_received += u64::from(frame);
-                        frame
+                    if !self.pace.open_loop {
+                        self.ledger.in_flight = Some(Instant::now());
                     }
-                    _ => false,
-                };
-                if tick_done {
-                    if let Some(sent) = in_flight.take() {
-                        report.latencies_ms.push(sent.elapsed().as_secs_f64() * 1e3);
-                    }
+                    phase = Phase::Draining { drain_tick_sent: true, until };
                 }
             }
         }
-        // Draining: once nothing is in flight, send the last tick; once it is back, stop.
-        if let Phase::Draining { drain_tick_sent } = phase {
-            if in_flight.is_none() {
-                if drain_tick_sent {
-                    break;
-                }
-                if ws.send(text(&ClientMessage::Tick)).await.is_err() {
-                    report.errors.push("websocket closed while draining".into());
-                    break;
-                }
-                in_flight = Some(Instant::now());
-                phase = Phase::Draining { drain_tick_sent: true };
+    }
+
+    /// One period scheduled at `at`: its edits, and a tick as the pace says. False when the
+    /// socket failed.
+    async fn period(&mut self, anim: &Animation, start: Instant, at: Instant) -> bool {
+        let edits = anim.edits_at(at.duration_since(start).as_secs_f32());
+        self.ledger.report.edits_sent += edits.len() as u64;
+        if !self.send(&ClientMessage::Edits { edits }, "sending edits").await {
+            return false;
+        }
+        if self.pace.open_loop {
+            self.ledger.unacknowledged.push_back(at);
+            return self.send(&ClientMessage::Tick, "sending a tick").await;
+        }
+        if self.ledger.in_flight.is_none() {
+            if !self.send(&ClientMessage::Tick, "sending a tick").await {
+                return false;
+            }
+            self.ledger.in_flight = Some(Instant::now());
+        }
+        true
+    }
+
+    /// Sends a message within the timeout; records an error and answers false otherwise.
+    async fn send(&mut self, m: &ClientMessage, what: &str) -> bool {
+        let text = Message::Text(serde_json::to_string(m).unwrap_or_default().into());
+        match tokio::time::timeout(self.pace.timeout, self.ws.send(text)).await {
+            Ok(Ok(())) => true,
+            Ok(Err(e)) => {
+                self.ledger.report.errors.push(format!("websocket failed while {what}: {e}"));
+                false
+            }
+            Err(_) => {
+                let timeout = self.pace.timeout;
+                self.ledger.report.errors.push(format!("the server did not read for {timeout:?} while {what}"));
+                false
             }
         }
     }
-    let _ = ws.close(None).await;
-    report
+}
+
+impl Ledger {
+    /// Something sent is still unanswered.
+    fn waiting(&self) -> bool {
+        self.in_flight.is_some() || !self.unacknowledged.is_empty() || !self.unapplied.is_empty()
+    }
+
+    fn receive(&mut self, msg: Message) {
+        match msg {
+            Message::Text(t) => {
+                self.report.bytes += t.len() as u64;
+                match serde_json::from_str::<ServerMessage>(&t) {
+                    Ok(ServerMessage::Stats { stats, frames_dropped }) => {
+                        let r = &mut self.report;
+                        r.ticks += 1;
+                        r.frames_dropped = frames_dropped;
+                        r.edits_received_by_server += stats.edits_received as u64;
+                        r.edits_coalesced += stats.edits_coalesced as u64;
+                        r.applied_through = r.applied_through.max(stats.edits_applied_through);
+                        if self.stats_only {
+                            self.frame_done(stats.edits_applied_through);
+                        } else {
+                            self.applied_pending = Some(stats.edits_applied_through);
+                        }
+                    }
+                    Ok(ServerMessage::EditsAccepted { queued, seq, .. }) => {
+                        self.report.batches_accepted.push((seq, queued as u64));
+                        if let Some(at) = self.unacknowledged.pop_front() {
+                            self.unapplied.push_back((seq, at));
+                        }
+                    }
+                    Ok(ServerMessage::Error { error, detail }) => {
+                        // An error answers the tick in flight (or an edit batch): either way the
+                        // tick will not come back, so stop waiting for it.
+                        self.report.errors.push(format!("{error}: {detail}"));
+                        self.in_flight = None;
+                    }
+                    Err(e) => self.report.errors.push(format!("unreadable message: {e}")),
+                }
+            }
+            Message::Binary(b) => {
+                self.report.bytes += b.len() as u64;
+                if FrameHeader::decode(&b).is_some() {
+                    self.report.frames_received += 1;
+                    if let Some(applied) = self.applied_pending.take() {
+                        self.frame_done(applied);
+                    }
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// A tick's frame (or stats, without frames) arrived, having applied batches up to `applied`.
+    fn frame_done(&mut self, applied: u64) {
+        if let Some(sent) = self.in_flight.take() {
+            self.report.latencies_ms.push(sent.elapsed().as_secs_f64() * 1e3);
+        }
+        while self.unapplied.front().is_some_and(|&(seq, _)| seq <= applied) {
+            if let Some((_, at)) = self.unapplied.pop_front() {
+                self.report.latencies_ms.push(at.elapsed().as_secs_f64() * 1e3);
+            }
+        }
+    }
+
+    /// Gives up on what has waited longer than `timeout`, counting each as an error.
+    fn expire(&mut self, timeout: Duration) {
+        if self.in_flight.is_some_and(|t| t.elapsed() > timeout) {
+            self.in_flight = None;
+            self.report.errors.push(format!("a tick did not come back within {timeout:?}"));
+        }
+        let stale = |at: &Instant| at.elapsed() > timeout;
+        while self.unacknowledged.front().is_some_and(stale) {
+            self.unacknowledged.pop_front();
+            self.report.errors.push(format!("an edit batch was not acknowledged within {timeout:?}"));
+        }
+        while self.unapplied.front().is_some_and(|(_, at)| stale(at)) {
+            self.unapplied.pop_front();
+            self.report.errors.push(format!("an edit batch was not applied by a frame within {timeout:?}"));
+        }
+    }
 }
 
 pub fn print_table(r: &LoadReport) {
-    println!("relume load: {} sessions of '{}' at {} Hz for {:.1} s", r.sessions, r.scene, r.hz, r.duration_s);
+    let pace = if r.open_loop { "open loop" } else { "closed loop" };
+    println!("relume load: {} sessions of '{}' at {} Hz ({pace}) for {:.1} s", r.sessions, r.scene, r.hz, r.duration_s);
     let rows: Vec<(&str, String)> = vec![
         ("ticks per second (all sessions)", format!("{:.1}", r.ticks_per_second)),
         (
@@ -410,5 +561,90 @@ pub fn run(args: LoadArgs) -> Result<()> {
 async fn delete_sessions(http: &reqwest::Client, base: &str, ids: &[String]) {
     for id in ids {
         let _ = http.delete(format!("{base}/v1/sessions/{id}")).send().await;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::server::protocol::ServerMessage;
+
+    fn text(m: &ServerMessage) -> Message {
+        Message::Text(serde_json::to_string(m).expect("message").into())
+    }
+
+    fn stats(applied_through: u64) -> Message {
+        let frame = crate::engine::TickStats {
+            tick: 0,
+            technique: "path".into(),
+            times: Default::default(),
+            rays: Default::default(),
+            edits_received: 1,
+            edits_coalesced: 0,
+            edits_unchanged: 0,
+            edits_applied_through: applied_through,
+            moved_surfaces: 0,
+            spp: 1,
+            paths_per_pixel: 1.0,
+            accumulation_id: 0,
+            aux_rays: 0,
+            detail: crate::technique::TechniqueStats::Path(Default::default()),
+        };
+        text(&ServerMessage::Stats { stats: Box::new(frame), frames_dropped: 0 })
+    }
+
+    fn ago(ms: u64) -> Instant {
+        Instant::now() - Duration::from_millis(ms)
+    }
+
+    /// Hazard: `relume load` waited forever for a tick the server had answered with an error.
+    #[test]
+    fn an_error_ends_the_tick_in_flight() {
+        let mut ledger = Ledger { stats_only: true, in_flight: Some(Instant::now()), ..Ledger::default() };
+        ledger.receive(text(&ServerMessage::Error { error: "session_failed".into(), detail: "panic".into() }));
+        assert!(!ledger.waiting(), "the stream would wait for a tick that is not coming");
+        assert_eq!(ledger.report.errors.len(), 1);
+    }
+
+    #[test]
+    fn open_loop_latency_runs_from_the_scheduled_time_to_the_frame_that_applies_the_batch() {
+        let mut ledger = Ledger { stats_only: true, ..Ledger::default() };
+        // Two periods scheduled 900 and 400 ms ago; both acknowledged (seq 1, 2).
+        ledger.unacknowledged.extend([ago(900), ago(400)]);
+        ledger.receive(text(&ServerMessage::EditsAccepted { queued: 1, pending: 1, seq: 1 }));
+        ledger.receive(text(&ServerMessage::EditsAccepted { queued: 1, pending: 1, seq: 2 }));
+        // A tick that applied only seq 1 answers the first period alone.
+        ledger.receive(stats(1));
+        assert_eq!(ledger.report.latencies_ms.len(), 1);
+        assert!(ledger.report.latencies_ms[0] >= 900.0, "{:?}", ledger.report.latencies_ms);
+        assert!(ledger.waiting());
+        ledger.receive(stats(2));
+        assert_eq!(ledger.report.latencies_ms.len(), 2);
+        assert!((400.0..900.0).contains(&ledger.report.latencies_ms[1]), "{:?}", ledger.report.latencies_ms);
+        assert!(!ledger.waiting());
+    }
+
+    #[test]
+    fn with_frames_a_tick_is_done_at_its_frame_not_its_stats() {
+        let mut ledger = Ledger { in_flight: Some(Instant::now()), ..Ledger::default() };
+        ledger.receive(stats(0));
+        assert!(ledger.waiting(), "stats alone ended the tick");
+        let header = FrameHeader { tick: 0, accumulation_id: 0, format: FrameFormat::Png, width: 1, height: 1 };
+        ledger.receive(Message::Binary(header.encode().to_vec().into()));
+        assert!(!ledger.waiting());
+        assert_eq!((ledger.report.frames_received, ledger.report.latencies_ms.len()), (1, 1));
+    }
+
+    #[test]
+    fn what_waits_past_the_timeout_is_an_error_and_is_dropped() {
+        let mut ledger = Ledger { in_flight: Some(ago(2000)), ..Ledger::default() };
+        ledger.unacknowledged.push_back(ago(2000));
+        ledger.unapplied.push_back((3, ago(2000)));
+        ledger.unapplied.push_back((4, ago(10)));
+        ledger.expire(Duration::from_secs(1));
+        assert_eq!(ledger.report.errors.len(), 3, "{:?}", ledger.report.errors);
+        // The recent batch still waits.
+        assert_eq!(ledger.unapplied.len(), 1);
+        assert!(ledger.in_flight.is_none() && ledger.unacknowledged.is_empty());
     }
 }

@@ -2,6 +2,7 @@
 //! binaries do; the library modules below them return typed errors.
 pub mod bench;
 pub mod bench_error;
+pub mod bench_fairness;
 pub mod bench_icache;
 pub mod bench_particles;
 pub mod bench_reuse;

@@ -30,6 +30,15 @@ pub struct ServeArgs {
     /// Seconds without a request or WebSocket message after which a session is deleted.
     #[arg(long, default_value_t = 600)]
     pub session_idle: u64,
+    /// Connections open at once (WebSockets included); more are answered 503 and closed.
+    #[arg(long, default_value_t = 512)]
+    pub max_connections: usize,
+    /// Seconds a connection may take to send a request's headers before it is closed.
+    #[arg(long, default_value_t = 10)]
+    pub header_timeout: u64,
+    /// Seconds shutdown (SIGINT, SIGTERM) waits for connections and sessions to finish.
+    #[arg(long, default_value_t = 30)]
+    pub drain_deadline: u64,
     /// A host name the `Host` header may carry besides IP addresses and localhost (repeat for
     /// more); other names get 421, which stops DNS rebinding.
     #[arg(long = "allow-host")]
@@ -66,6 +75,9 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
     if args.session_idle == 0 {
         return Err(UsageError("--session-idle must be at least 1 second".into()).into());
     }
+    if args.max_connections == 0 || args.header_timeout == 0 {
+        return Err(UsageError("--max-connections and --header-timeout must be at least 1".into()).into());
+    }
     if args.session_memory == 0 || args.server_memory == Some(0) {
         return Err(UsageError("--session-memory and --server-memory must be at least 1 MiB".into()).into());
     }
@@ -81,6 +93,9 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
             session_memory: args.session_memory << 20,
             server_memory,
             session_idle: std::time::Duration::from_secs(args.session_idle),
+            max_connections: args.max_connections,
+            header_read_timeout: std::time::Duration::from_secs(args.header_timeout),
+            drain_deadline: std::time::Duration::from_secs(args.drain_deadline),
             ..Limits::default()
         },
         access: Access { hosts: args.allow_hosts.clone(), origins: args.allow_origins.clone() },
@@ -103,7 +118,7 @@ pub fn run(args: ServeArgs) -> Result<()> {
         .enable_all()
         .build()
         .context("starting the async runtime")?;
-    runtime.block_on(async move {
+    let served = runtime.block_on(async move {
         let state = Arc::new(AppState::new(config)?);
         let listener =
             tokio::net::TcpListener::bind(args.addr).await.with_context(|| format!("binding {}", args.addr))?;
@@ -115,5 +130,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
         eprintln!("relume: serving {} on http://{}/ (Ctrl-C to stop)", args.scenes.display(), listener.local_addr()?);
         server::run(listener, state, server::shutdown_signal()).await?;
         Ok(())
-    })
+    });
+    // A session still ticking past the drain deadline must not hold the process open.
+    runtime.shutdown_timeout(std::time::Duration::from_secs(1));
+    served
 }
