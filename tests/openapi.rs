@@ -86,6 +86,11 @@ async fn routes_match_the_spec() {
                     status != 405 && !body.contains("no such route"),
                     "{m} {path} is documented but not served ({status}: {body})"
                 );
+                let documented = &spec()["paths"][path.as_str()][m]["responses"];
+                assert!(
+                    documented.get(status.to_string()).is_some(),
+                    "{m} {path} answered {status}, which the spec does not document ({body})"
+                );
             } else {
                 assert!(
                     status == 405 || (status == 404 && body.contains("no such route")),
@@ -113,4 +118,67 @@ fn every_technique_configuration_is_documented() {
         assert!(errors.is_empty(), "{id}: {value} against the spec: {errors:?}");
     }
     assert!(!validator.is_valid(&serde_json::json!({"id": "warp"})));
+}
+
+/// Every operation: (path, method, operation).
+fn operations(spec: &Value) -> Vec<(String, String, Value)> {
+    let mut out = Vec::new();
+    for (path, item) in spec["paths"].as_mapping().unwrap() {
+        for m in METHODS {
+            if let Some(op) = item.get(m) {
+                out.push((path.as_str().unwrap().to_string(), m.to_string(), op.clone()));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn every_operation_has_an_id_and_documents_what_every_route_can_answer() {
+    // A client generator or fuzzer needs operationIds, and every status the server can send:
+    // every /v1 route passes the token check (401), the request timeout (408), the Host check
+    // (421) and the connection limit (503), and can fail inside (500); a session route can
+    // find no session (404); a route with a body checks its type (415), size (413) and content
+    // (422).
+    let spec = spec();
+    let mut ids = BTreeSet::new();
+    for (path, m, op) in operations(&spec) {
+        let id = op["operationId"].as_str().unwrap_or_else(|| panic!("{m} {path} has no operationId"));
+        assert!(ids.insert(id.to_string()), "operationId {id} is used twice");
+        if !path.starts_with("/v1/") {
+            continue;
+        }
+        let mut needed = vec!["401", "408", "421", "500", "503"];
+        if path.contains("{id}") {
+            needed.push("404");
+        }
+        if op.get("requestBody").is_some() {
+            needed.extend(["413", "415", "422"]);
+        }
+        for status in needed {
+            assert!(op["responses"].get(status).is_some(), "{m} {path} does not document {status}");
+        }
+    }
+}
+
+#[test]
+fn session_creation_links_to_every_operation_on_a_session() {
+    // A stateful API fuzzer follows links: without them it never learns a session id and
+    // every session operation only ever answers it 404.
+    let spec = spec();
+    let links = spec["paths"]["/v1/sessions"]["post"]["responses"]["201"]["links"].as_mapping().expect("links");
+    let linked: BTreeSet<String> =
+        links.values().map(|l| l["operationId"].as_str().expect("operationId").to_string()).collect();
+    for link in links.values() {
+        assert_eq!(link["parameters"]["id"].as_str(), Some("$response.body#/id"), "{link:?}");
+    }
+    for (path, m, op) in operations(&spec) {
+        if path.contains("{id}") {
+            let id = op["operationId"].as_str().unwrap_or_default();
+            assert!(linked.contains(id), "{m} {path} ({id}) is not linked from session creation");
+        }
+    }
+    let ids: BTreeSet<String> =
+        operations(&spec).iter().filter_map(|(_, _, op)| op["operationId"].as_str().map(str::to_string)).collect();
+    assert!(linked.is_subset(&ids), "a link names an operation that does not exist");
 }
