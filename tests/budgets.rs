@@ -24,14 +24,14 @@ fn every_estimate_covers_what_the_first_tick_holds() {
         scene.set_resolution(32, 32);
         for config in &configs {
             let estimate = config.resident_estimate(&scene, 32 * 32).expect("within the limits");
-            let held = render(scene.clone(), config.clone(), 1, 1, 2).stats.detail.memory_bytes();
+            let held = render(scene.clone(), config.clone(), 1, 1, 2).stats.detail.memory().total_bytes;
             assert!(held > 0, "{scene_name} {}: nothing reported", config.id());
             assert!(estimate.bytes >= held, "{scene_name} {config:?}: estimate {} < held {held}", estimate.bytes);
             assert!(estimate.bytes <= 64 * held, "{scene_name} {config:?}: estimate {} vs held {held}", estimate.bytes);
         }
         let full = TechniqueConfig::PhotonReuse(PhotonReuseConfig { paths: 40_000, ..PhotonReuseConfig::default() });
         let half = TechniqueConfig::PhotonReuse(PhotonReuseConfig { paths: 20_000, ..PhotonReuseConfig::default() });
-        let held = render(scene.clone(), full, 1, 1, 2).stats.detail.memory_bytes();
+        let held = render(scene.clone(), full, 1, 1, 2).stats.detail.memory().total_bytes;
         assert!(half.resident_estimate(&scene, 32 * 32).unwrap().bytes < held, "{scene_name}: the control passed");
     }
 }

@@ -72,7 +72,7 @@ fn the_cache_is_sparse_and_igi_gathers_a_subset_per_pixel() {
     assert!(s.records > 10 && s.records < pixels / 4, "{} records for {pixels} pixels", s.records);
     assert_eq!(s.records, s.records_created);
     assert!(s.visibility_rays <= s.records * s.vpls && s.visibility_rays > s.records * s.vpls / 4);
-    assert!(s.cache_bytes >= s.records * s.vpls * 4, "RGBE: 4 bytes per VPL per record");
+    assert!(s.memory.part("cache") >= s.records * s.vpls * 4, "RGBE: 4 bytes per VPL per record");
     let i = stats(&render(scene, TechniqueConfig::InstantCache(config(CacheMode::Igi)), 1, 1, 2));
     let per_pixel = i.visibility_rays as f64 / pixels as f64;
     eprintln!("igi: {per_pixel:.1} visibility rays per pixel for {} VPLs", i.vpls);

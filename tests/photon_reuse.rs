@@ -190,7 +190,7 @@ fn only_what_the_scene_uses_is_allocated() {
     let memory = |name: &str, paths: u32| {
         let mut scene = load(name);
         scene.set_resolution(8, 8);
-        photon_stats(&render(scene, TechniqueConfig::PhotonReuse(config(paths, ReuseMode::Naive)), 1, 1, 1)).memory
+        photon_stats(&render(scene, TechniqueConfig::PhotonReuse(config(paths, ReuseMode::Naive)), 1, 1, 1)).store
     };
     let point = memory("furnace.json", 1000);
     let area = memory("cornell-box.json", 1000);
@@ -212,12 +212,12 @@ fn only_what_the_scene_uses_is_allocated() {
     s.queue_edits(vec![camera_dolly()]).unwrap();
     let still = photon_stats(&s.tick().unwrap());
     assert_eq!((still.verify_box_tests, still.verify_rays, still.origin_rays), (0, 0, 0));
-    assert_eq!((still.memory.distribution_maps, still.memory.light_slots), (0, 0));
+    assert_eq!((still.store.distribution_maps, still.store.light_slots), (0, 0));
     let moved = Trs { translation: [0.1, 0.0, 0.0], rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0, 1.0, 1.0] };
     s.queue_edits(vec![Edit::Light { name: "centre".into(), transform: Some(moved), emitter: None }]).unwrap();
     let m = photon_stats(&s.tick().unwrap());
     let cells = relume::technique::photon_reuse::MapResolution::default().direction.iter().product::<u32>() as u64;
     assert_eq!(m.distribution_cells, cells, "a point light's map is 2-D");
-    assert!(m.memory.distribution_maps > 0);
-    assert_eq!(m.memory.origins, 0);
+    assert!(m.store.distribution_maps > 0);
+    assert_eq!(m.store.origins, 0);
 }

@@ -109,7 +109,7 @@ fn distribution_maps_converge_to_their_targets_after_a_light_stops() {
             };
             let mut s = session(scene, config, 11, &device);
             let first = photon_stats(&s.tick().unwrap());
-            assert_eq!((first.distribution_cells, first.memory.distribution_maps), (0, 0), "{name}");
+            assert_eq!((first.distribution_cells, first.store.distribution_maps), (0, 0), "{name}");
             let rotation = if name == "point" { [0.0, 0.0, 0.0, 1.0] } else { FACE_DOWN };
             let scale = if name == "rect" { [0.3, 0.3, 1.0] } else { [1.0; 3] };
             s.queue_edits(vec![move_light("lamp", trs([0.35, 0.3, -0.2], rotation, scale))]).unwrap();
@@ -124,7 +124,7 @@ fn distribution_maps_converge_to_their_targets_after_a_light_stops() {
             }
             eprintln!("{name}: χ² over 8 ticks {chi2:?} (critical {critical:.0}, dof {dof})");
             assert!(chi2[7] < critical, "{name}: DM_C did not converge: χ² {chi2:?}");
-            assert!(moved.memory.distribution_maps > 0, "{name}");
+            assert!(moved.store.distribution_maps > 0, "{name}");
         });
     }
 }

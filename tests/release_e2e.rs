@@ -77,7 +77,12 @@ async fn drive_session(http: &reqwest::Client, served: &Served, technique: Value
 
     // Tick over HTTP; fetch that tick's PNG and EXR.
     let r = http.post(served.url(&format!("/v1/sessions/{id}/tick"))).send().await.expect("tick");
-    assert_eq!(r.status(), 200, "{label}: {}", r.text().await.unwrap_or_default());
+    assert_eq!(r.status(), 200, "{label}");
+    // Every technique reports what it holds: `detail.memory`, a total and its parts.
+    let done: Value = r.json().await.expect("tick JSON");
+    let memory = &done["stats"]["detail"]["memory"];
+    let parts: u64 = memory["parts"].as_object().expect("memory.parts").values().filter_map(Value::as_u64).sum();
+    assert_eq!(memory["total_bytes"].as_u64(), Some(parts), "{label}: {memory}");
     let png = http.get(served.url(&format!("/v1/sessions/{id}/frame.png?tick=0"))).send().await.expect("png");
     assert_eq!(png.status(), 200, "{label}");
     let png = image::load_from_memory(&png.bytes().await.expect("bytes")).expect("a PNG");

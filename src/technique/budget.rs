@@ -8,6 +8,30 @@
 //! product that overflows is refused like one over the budget. `tests/budgets.rs` checks every
 //! estimate against the memory the technique reports after its first tick.
 use super::TechniqueError;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// What a technique holds resident between ticks, as it reports each tick in
+/// `TickStats.detail.memory`: bytes per structure (named by the technique) and their total.
+/// The film, which every session has, is the engine's and not included.
+#[derive(Clone, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ResidentMemory {
+    pub total_bytes: u64,
+    pub parts: BTreeMap<String, u64>,
+}
+
+impl ResidentMemory {
+    /// Sets one structure's bytes and the total.
+    pub fn set(&mut self, part: &str, bytes: u64) {
+        self.parts.insert(part.to_string(), bytes);
+        self.total_bytes = self.parts.values().sum();
+    }
+
+    /// One structure's bytes (0 if it has none).
+    pub fn part(&self, part: &str) -> u64 {
+        self.parts.get(part).copied().unwrap_or(0)
+    }
+}
 
 /// A technique's resident memory and the configuration field that sizes most of it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

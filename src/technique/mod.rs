@@ -16,7 +16,7 @@ pub mod path;
 pub mod photon_reuse;
 mod spec;
 
-pub use budget::MemoryEstimate;
+pub use budget::{MemoryEstimate, ResidentMemory};
 
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -92,15 +92,15 @@ pub enum TechniqueStats {
 pub const TECHNIQUE_IDS: &[&str] = &["path", "photon_reuse", "bdpt", "instant_cache", "particle_gi"];
 
 impl TechniqueStats {
-    /// Bytes the technique keeps resident between ticks (its light-transport state; the film
-    /// is the engine's).
-    pub fn memory_bytes(&self) -> u64 {
+    /// What the technique keeps resident between ticks (its light-transport state; the film
+    /// is the engine's). `path` and `bdpt` keep nothing.
+    pub fn memory(&self) -> &ResidentMemory {
         match self {
-            TechniqueStats::Path(_) => 0,
-            TechniqueStats::PhotonReuse(s) => s.memory.total() + s.grid_bytes + s.pixel_bytes,
-            TechniqueStats::Bdpt(_) => 0,
-            TechniqueStats::InstantCache(s) => s.vpl_bytes + s.cache_bytes,
-            TechniqueStats::ParticleGi(s) => s.memory_bytes(),
+            TechniqueStats::Path(s) => &s.memory,
+            TechniqueStats::PhotonReuse(s) => &s.memory,
+            TechniqueStats::Bdpt(s) => &s.memory,
+            TechniqueStats::InstantCache(s) => &s.memory,
+            TechniqueStats::ParticleGi(s) => &s.memory,
         }
     }
 }
@@ -161,7 +161,6 @@ impl TechniqueConfig {
         }
     }
 
-    /// Resident photon paths the technique keeps (0 for techniques without any).
     /// Resident memory the technique will hold on `scene` at `pixels` pixels, before anything
     /// is allocated (see `budget.rs`). The film, which every technique has, is not included.
     pub fn resident_estimate(
@@ -177,6 +176,7 @@ impl TechniqueConfig {
         }
     }
 
+    /// Resident photon paths the technique keeps (0 for techniques without any).
     pub fn photon_paths(&self) -> u32 {
         match self {
             TechniqueConfig::Path(_)

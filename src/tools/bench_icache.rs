@@ -123,7 +123,7 @@ pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
             visibility_rays_median: quantile(&col(&|f| f.visibility_rays as f64), 0.5),
             records_median: quantile(&col(&|f| f.records as f64), 0.5),
             records_created_median: quantile(&col(&|f| f.records_created as f64), 0.5),
-            memory_bytes: last.map_or(0, |s| s.vpl_bytes + s.cache_bytes),
+            memory_bytes: last.map_or(0, |s| s.memory.total_bytes),
             audit_mismatched: figures.iter().map(|f| f.stats.audit_mismatched).sum(),
             audit_off_surface: figures.iter().map(|f| f.stats.audit_off_surface).sum(),
         };

@@ -198,8 +198,8 @@ pub fn print_table(r: &ParticlesReport) {
         "  geometry stage: {:.1} ms ({} links traced, {:.1} MiB links, {:.1} MiB particles)",
         b.geometry_ms,
         b.links_traced,
-        (b.scatter_link_bytes + b.gather_link_bytes) as f64 / 1048576.0,
-        b.particle_bytes as f64 / 1048576.0
+        (b.memory.part("scatter_links") + b.memory.part("gather_links")) as f64 / 1048576.0,
+        b.memory.part("particles") as f64 / 1048576.0
     );
     let s = &r.relight;
     println!(

@@ -125,7 +125,7 @@ fn measure_size(
             let TechniqueStats::PhotonReuse(s) = &frame.stats.detail else {
                 anyhow::bail!("photon_reuse stats expected");
             };
-            memory = s.memory.total() + s.grid_bytes;
+            memory = s.memory.total_bytes;
             let t = &frame.stats.times;
             let stages = BTreeMap::from([
                 ("apply_and_commit", t.apply_ms + t.commit_ms),

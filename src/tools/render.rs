@@ -143,7 +143,7 @@ fn render_still(args: &RenderArgs) -> Result<()> {
         mean.r,
         mean.g,
         mean.b,
-        frame.stats.detail.memory_bytes() as f64 / 1048576.0
+        frame.stats.detail.memory().total_bytes as f64 / 1048576.0
     );
     Ok(())
 }

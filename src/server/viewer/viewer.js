@@ -78,6 +78,7 @@ function showStats(s, dropped) {
     ["rays primary", s.rays.primary], ["rays secondary", s.rays.secondary], ["rays shadow", s.rays.shadow],
     ["edits received / coalesced / unchanged", `${s.edits_received} / ${s.edits_coalesced} / ${s.edits_unchanged}`],
     ["frames dropped", dropped],
+    ["resident memory (MiB)", (s.detail.memory.total_bytes / 1048576).toFixed(1)],
   ];
   $("stats").tBodies[0].innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
   const stages = ["apply_ms", "commit_ms", "update_ms", "render_ms", "resolve_ms", "denoise_ms"];

@@ -129,6 +129,9 @@ pub struct BdptStats {
     pub lanes: PathStats,
     pub light_subpaths: u64,
     pub light_subpath_rays: u64,
+    /// Nothing: light subpaths live for one pass.
+    #[serde(default)]
+    pub memory: super::ResidentMemory,
 }
 
 /// Separates light-subpath random streams from eye-path streams keyed by the same numbers.
@@ -191,7 +194,12 @@ impl Technique for Bdpt {
                     first,
                     chunk,
                 );
-                BdptStats { lanes, light_subpaths: batch.len() as u64, light_subpath_rays: light_rays }
+                BdptStats {
+                    lanes,
+                    light_subpaths: batch.len() as u64,
+                    light_subpath_rays: light_rays,
+                    ..Default::default()
+                }
             },
             BdptStats::merge,
         );
@@ -210,6 +218,7 @@ impl BdptStats {
             lanes: self.lanes.merge(o.lanes),
             light_subpaths: self.light_subpaths + o.light_subpaths,
             light_subpath_rays: self.light_subpath_rays + o.light_subpath_rays,
+            memory: self.memory,
         }
     }
 }

@@ -156,8 +156,8 @@ pub struct InstantCacheStats {
     /// the IGI gather and filter.
     pub indirect_ms: f64,
     pub render_ms: f64,
-    pub vpl_bytes: u64,
-    pub cache_bytes: u64,
+    /// `vpls` and `cache` (records, their contributions and the octree).
+    pub memory: crate::technique::ResidentMemory,
     /// With `audit`: records checked, those differing from a fresh computation, and those no
     /// longer on any surface.
     pub audit_records: u64,

@@ -256,7 +256,7 @@ impl InstantCache {
             }
         }
         stats.records = cache.records.len() as u64;
-        stats.cache_bytes = cache.memory_bytes();
+        stats.memory.set("cache", cache.memory_bytes());
         indirect
     }
 
@@ -347,7 +347,7 @@ impl Technique for InstantCache {
         self.pending.vpls = self.vpls.len() as u64;
         self.pending.vpl_paths = paths;
         self.pending.vpl_rays = rays;
-        self.pending.vpl_bytes = (self.vpls.len() * std::mem::size_of::<Vpl>()) as u64;
+        self.pending.memory.set("vpls", (self.vpls.len() * std::mem::size_of::<Vpl>()) as u64);
         self.pending.vpl_ms = t.elapsed().as_secs_f64() * 1e3;
         if self.config.mode == CacheMode::Temporal {
             let t = Instant::now();

@@ -174,15 +174,6 @@ pub struct ParticleStats {
     pub gathering_ms: f64,
     pub estimation_ms: f64,
     pub final_ms: f64,
-    pub particle_bytes: u64,
-    pub scatter_link_bytes: u64,
-    pub gather_link_bytes: u64,
-    pub list_bytes: u64,
-    pub grid_bytes: u64,
-}
-
-impl ParticleStats {
-    pub fn memory_bytes(&self) -> u64 {
-        self.particle_bytes + self.scatter_link_bytes + self.gather_link_bytes + self.list_bytes + self.grid_bytes
-    }
+    /// `particles` (with the tessellation), `scatter_links`, `gather_links`, `lists`, `grid`.
+    pub memory: crate::technique::ResidentMemory,
 }

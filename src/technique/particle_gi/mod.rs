@@ -415,11 +415,12 @@ impl Technique for ParticleGi {
             stats.radiance_particles = g.tessellation.total;
             stats.links_total = (g.scatter.len() + g.gather.len()) as u64;
             stats.lists_cached = g.lists.lists.len() as u64;
-            stats.particle_bytes = g.particles.memory_bytes() + g.tessellation.memory_bytes();
-            stats.scatter_link_bytes = g.scatter.memory_bytes();
-            stats.gather_link_bytes = g.gather.memory_bytes();
-            stats.list_bytes = g.lists.memory_bytes();
-            stats.grid_bytes = g.grid.memory_bytes();
+            let memory = &mut stats.memory;
+            memory.set("particles", g.particles.memory_bytes() + g.tessellation.memory_bytes());
+            memory.set("scatter_links", g.scatter.memory_bytes());
+            memory.set("gather_links", g.gather.memory_bytes());
+            memory.set("lists", g.lists.memory_bytes());
+            memory.set("grid", g.grid.memory_bytes());
         }
         if let Some(f) = &self.field {
             stats.particles_lit = f.lit;

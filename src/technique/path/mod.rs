@@ -122,6 +122,9 @@ pub struct PathStats {
     pub queue_pixels: u32,
     /// ρ_S used for l_m.
     pub mean_reflectance: f32,
+    /// Nothing: a path tracer keeps no light transport between ticks.
+    #[serde(default)]
+    pub memory: super::ResidentMemory,
 }
 
 impl PathStats {

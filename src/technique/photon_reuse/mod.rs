@@ -512,9 +512,9 @@ impl Technique for PhotonReuse {
         let p = &mut self.pending;
         p.paths = store.paths as u64;
         p.untouched = p.paths.saturating_sub(p.partly_retraced + p.fully_retraced);
-        p.memory = store.memory();
-        p.memory.distribution_maps = self.maps.iter().flatten().map(|m| m.map.memory_bytes()).sum();
-        p.memory.light_slots = self.maps.iter().flatten().map(|m| m.slots.len() as u64 * 4).sum();
+        p.store = store.memory();
+        p.store.distribution_maps = self.maps.iter().flatten().map(|m| m.map.memory_bytes()).sum();
+        p.store.light_slots = self.maps.iter().flatten().map(|m| m.slots.len() as u64 * 4).sum();
         if let Some((chi2, cells)) = self
             .maps
             .iter()
@@ -569,8 +569,9 @@ impl Technique for PhotonReuse {
         stats.radius = self.grid.radius;
         stats.grid_photons = self.grid.len() as u64;
         stats.grid_power = self.grid.power;
-        stats.grid_bytes = self.grid.memory_bytes();
-        stats.pixel_bytes = self.pixels.memory_bytes();
+        stats.memory = stats.store.resident();
+        stats.memory.set("grid", self.grid.memory_bytes());
+        stats.memory.set("pixels", self.pixels.memory_bytes());
         // Photon rays count by query: closest-hit (verification, retraces, fills) as secondary,
         // occlusion (primary-segment checks of moved lights) as shadow rays.
         let counts = RayCounts {

@@ -74,11 +74,11 @@ pub struct PhotonStats {
     pub followed: bool,
     /// What following did to the pixels (all zero after a full pass).
     pub pixels: FollowCounts,
-    // Memory.
-    pub memory: StoreMemory,
-    pub grid_bytes: u64,
-    /// The kept camera samples and their hit index.
-    pub pixel_bytes: u64,
+    /// The path store's structures.
+    pub store: StoreMemory,
+    /// Everything resident: the store's parts, the photon grid (`grid`) and the kept camera
+    /// samples with their hit index (`pixels`).
+    pub memory: crate::technique::ResidentMemory,
 }
 
 impl PhotonStats {

@@ -146,14 +146,25 @@ pub struct StoreMemory {
 }
 
 impl StoreMemory {
+    /// The store's parts as the technique reports them (`PhotonStats::memory`).
+    pub fn resident(&self) -> crate::technique::ResidentMemory {
+        let mut m = crate::technique::ResidentMemory::default();
+        for (part, bytes) in [
+            ("photon_map", self.photon_map),
+            ("path_words", self.path_words),
+            ("origins", self.origins),
+            ("segment0_and_escape", self.segment0_and_escape),
+            ("generations", self.generations),
+            ("distribution_maps", self.distribution_maps),
+            ("light_slots", self.light_slots),
+        ] {
+            m.set(part, bytes);
+        }
+        m
+    }
+
     pub fn total(&self) -> u64 {
-        self.photon_map
-            + self.path_words
-            + self.origins
-            + self.segment0_and_escape
-            + self.generations
-            + self.distribution_maps
-            + self.light_slots
+        self.resident().total_bytes
     }
 }
 

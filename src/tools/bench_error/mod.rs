@@ -267,7 +267,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
                             ("denoise", t.denoise_ms),
                         ]),
                         rays: f.stats.rays.total() + f.stats.aux_rays,
-                        memory_bytes: f.stats.detail.memory_bytes(),
+                        memory_bytes: f.stats.detail.memory().total_bytes,
                         error,
                     });
                     run_bar.inc(1);
