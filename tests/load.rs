@@ -20,6 +20,7 @@ async fn two_sessions_for_five_seconds_lose_nothing() {
         technique: "path".into(),
         open_loop: false,
         timeout: Duration::from_secs(30),
+        warmup: Duration::from_secs(1),
         width: Some(64),
         height: Some(64),
         frames: "png".into(),

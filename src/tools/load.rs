@@ -73,6 +73,10 @@ pub struct LoadArgs {
     pub frames: String,
     #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
+    /// The server's RSS is sampled this long into the run too, and its growth reported from
+    /// there to the end (a soak's measure of leaks, after caches and pools have filled).
+    #[arg(long, default_value = "10s", value_parser = humantime::parse_duration)]
+    pub warmup: Duration,
     /// Also write the report as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -130,6 +134,9 @@ pub struct LoadReport {
     pub error_samples: Vec<String>,
     pub server_rss_start_bytes: u64,
     pub server_rss_end_bytes: u64,
+    /// RSS `--warmup` into the run, and the growth from there to the end (end ÷ warm − 1).
+    pub server_rss_warm_bytes: u64,
+    pub rss_growth_after_warmup: f64,
     /// Server time spent encoding frames ÷ time spent ticking, during the run.
     pub encode_to_tick_ratio: f64,
 }
@@ -210,6 +217,13 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         ids.push(v["id"].as_str().unwrap_or_default().to_string());
     }
     let started = Instant::now();
+    let warm = {
+        let (http, base, warmup) = (http.clone(), base.clone(), args.warmup);
+        tokio::spawn(async move {
+            tokio::time::sleep(warmup).await;
+            server_figures(&http, &base).await.0
+        })
+    };
     let ws_base = base.replacen("http", "ws", 1);
     let tasks: Vec<_> = ids
         .iter()
@@ -231,6 +245,7 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
     }
     let elapsed = started.elapsed().as_secs_f64();
     let (rss_end, encode_end, tick_end) = server_figures(&http, &base).await;
+    let rss_warm = warm.await.unwrap_or(0);
     delete_sessions(&http, &base, &ids).await;
 
     let mut lat: Vec<f64> = reports.iter().flat_map(|r| r.latencies_ms.iter().copied()).collect();
@@ -260,6 +275,8 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         error_samples: errors.into_iter().take(5).collect(),
         server_rss_start_bytes: rss_start,
         server_rss_end_bytes: rss_end,
+        server_rss_warm_bytes: rss_warm,
+        rss_growth_after_warmup: if rss_warm > 0 { rss_end as f64 / rss_warm as f64 - 1.0 } else { 0.0 },
         encode_to_tick_ratio: if tick_end > tick_start {
             (encode_end - encode_start) / (tick_end - tick_start)
         } else {
@@ -534,6 +551,14 @@ pub fn print_table(r: &LoadReport) {
                 "{:.1} / {:.1}",
                 r.server_rss_start_bytes as f64 / 1048576.0,
                 r.server_rss_end_bytes as f64 / 1048576.0
+            ),
+        ),
+        (
+            "server RSS after warm-up / growth since",
+            format!(
+                "{:.1} MiB / {:+.2}%",
+                r.server_rss_warm_bytes as f64 / 1048576.0,
+                100.0 * r.rss_growth_after_warmup
             ),
         ),
         ("server encode time / tick time", format!("{:.3}", r.encode_to_tick_ratio)),
