@@ -143,3 +143,29 @@ fn shutdown_does_not_wait_past_its_deadline_for_a_long_tick() {
     // The tick still running is the process's to end, as `relume serve` does.
     runtime.shutdown_background();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_creation_that_times_out_leaves_no_session_behind() {
+    // Hazard: a creation answered 408 (or whose client went away) went on loading in the
+    // background and added a session nobody knew the id of, holding its memory until idle
+    // expiry.
+    let limits = Limits { request_timeout: Duration::from_millis(1), ..Limits::default() };
+    let s = TestServer::start(None, limits).await;
+    let body =
+        json!({"scene": "bunnies-1", "width": 64, "height": 64, "technique": {"id": "photon_reuse", "paths": 100000}});
+    let r = s.http.post(s.url("/v1/sessions")).json(&body).send().await.expect("request");
+    assert_eq!(r.status(), 408);
+    // The creation finishes in the background; then the session must be gone again.
+    let created = Instant::now();
+    while s.state.metrics.sessions_created.load(std::sync::atomic::Ordering::Relaxed) == 0 {
+        assert!(created.elapsed() < Duration::from_secs(60), "the creation never finished");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while s.state.session_count() > 0 && Instant::now() < deadline {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    assert_eq!(s.state.session_count(), 0, "an orphaned session is left");
+    assert_eq!(s.state.reserved_bytes(), 0);
+    s.shutdown().await.expect("shutdown");
+}

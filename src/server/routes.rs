@@ -85,10 +85,43 @@ pub async fn create_session(
     ApiJson(req): ApiJson<CreateSession>,
 ) -> Result<(StatusCode, Json<SessionView>), ApiError> {
     let state = s.clone();
-    let view = tokio::task::spawn_blocking(move || state.create_session(req))
+    let created = tokio::task::spawn_blocking(move || state.create_session(req).map(|v| Created::new(state, v)))
         .await
         .map_err(|e| ApiError::internal(e.to_string()))??;
-    Ok((StatusCode::CREATED, Json(view)))
+    Ok((StatusCode::CREATED, Json(created.keep())))
+}
+
+/// A session just created, on its way to the client that asked for it. If the request is
+/// dropped first (it timed out with 408, or the client went away), nobody will ever learn its
+/// id, so dropping this deletes it instead of leaving it to idle expiry.
+struct Created {
+    view: SessionView,
+    state: Shared,
+    kept: bool,
+}
+
+impl Created {
+    fn new(state: Shared, view: SessionView) -> Created {
+        Created { view, state, kept: false }
+    }
+
+    /// The client has it: keep the session.
+    fn keep(mut self) -> SessionView {
+        self.kept = true;
+        self.view.clone()
+    }
+}
+
+impl Drop for Created {
+    fn drop(&mut self) {
+        if !self.kept {
+            let id = self.view.id.clone();
+            tracing::info!(target: "relume::server", "session {id} deleted: its creation request was dropped");
+            // Stopping the worker joins its thread: not on the async runtime.
+            let state = self.state.clone();
+            std::thread::spawn(move || state.remove_session_blocking(&id));
+        }
+    }
 }
 
 pub async fn list_sessions(State(s): State<Shared>) -> Result<Json<SessionList>, ApiError> {
