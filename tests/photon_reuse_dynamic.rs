@@ -427,3 +427,62 @@ fn error_mode_is_unbiased_after_a_move() {
         "the control passed"
     );
 }
+
+/// The Cornell box at 64² with a cube of side `side` (mm) floating in the middle of the room.
+fn cornell_with_a_cube(side: f32) -> Scene {
+    let text = std::fs::read_to_string(scenes_dir().join("cornell-box.json")).expect("bundled scene");
+    let mut doc: serde_json::Value = serde_json::from_str(&text).expect("scene JSON");
+    let half = side / 2.0;
+    doc["objects"].as_array_mut().expect("objects").push(json!({
+        "name": "cube", "dynamic": true, "shape": {"type": "box"}, "material": "white",
+        "transform": {"translation": [278.0, 300.0, 279.5], "scale": [half, half, half]}
+    }));
+    doc["camera"]["resolution"] = json!([64, 64]);
+    scene_from_json(doc)
+}
+
+/// (photons the grid took out and put in, camera samples taken again) when the cube of side
+/// `side` moves by a quarter of its side, after one still tick. A full pass samples every pixel
+/// again; a followed render only those whose camera ray the move may cross.
+fn touched_by_a_move(side: f32, reuse: ReuseMode, device: &Device) -> (u64, u64) {
+    let pool = thread_pool(2).expect("pool");
+    let config = PhotonReuseConfig { paths: 50_000, reuse, refine: 0.0, ..PhotonReuseConfig::default() };
+    let scene = cornell_with_a_cube(side);
+    let pixels = u64::from(scene.camera.width) * u64::from(scene.camera.height);
+    let mut s = session(scene, config, 11, device);
+    pool.install(|| s.tick()).expect("tick 0");
+    let cube = s.scene().desc().objects.iter().find(|o| o.name == "cube").expect("cube").transform;
+    let moved =
+        Trs { translation: [cube.translation[0] + side / 4.0, cube.translation[1], cube.translation[2]], ..cube };
+    s.queue_edits(vec![Edit::Object { name: "cube".into(), transform: moved }]).expect("edit");
+    let stats = photon_stats(&pool.install(|| s.tick()).expect("tick 1"));
+    eprintln!("side {side} {reuse:?}: followed {}, {:?}", stats.followed, stats.pixels);
+    let sampled = if stats.followed { stats.pixels.resampled } else { pixels };
+    (stats.grid_removed + stats.grid_added, sampled)
+}
+
+#[test]
+fn a_move_touches_photons_and_pixels_in_proportion_to_the_objects_footprint() {
+    // Cost follows the change: twice the cube's side is four times its cross-section, so about
+    // four times the photon segments crossing it, and more of the pixels whose camera ray it
+    // may cross, in a room whose size does not change. Bounds [2, 8] allow for the room's
+    // light not being uniform and for the boxes' fixed slack. (The pixels whose direct light
+    // is recomputed follow the cube's shadow, umbra and penumbra, which under the box's large
+    // area light is mostly the light's size; the test prints them.)
+    let device = Device::new(2).expect("device");
+    let ratio = |reuse: ReuseMode| {
+        let (small, large) = (touched_by_a_move(40.0, reuse, &device), touched_by_a_move(80.0, reuse, &device));
+        (large.0 as f64 / small.0.max(1) as f64, large.1 as f64 / small.1.max(1) as f64)
+    };
+    let in_proportion = |(photons, pixels): (f64, f64)| (2.0..=8.0).contains(&photons) && (2.0..=8.0).contains(&pixels);
+    let followed = ratio(ReuseMode::Naive);
+    assert!(in_proportion(followed), "photons x{:.2}, pixels x{:.2} for twice the side", followed.0, followed.1);
+    // Negative control: retracing everything touches the whole map and film whatever the size.
+    let everything = ratio(ReuseMode::Off);
+    assert!(
+        !in_proportion(everything),
+        "off mode passed too: photons x{:.2}, pixels x{:.2}",
+        everything.0,
+        everything.1
+    );
+}

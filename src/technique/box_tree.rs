@@ -214,9 +214,85 @@ pub fn segment_hits_box(origin: Vec3, dir: Vec3, t_max: f32, b: &Aabb) -> bool {
     true
 }
 
+/// Does box `b` meet the convex hull of the point `p` and the box `l`, the region every segment
+/// from `p` to a point of `l` sweeps? (Exact; touching counts.) A point x of `b` lies on such a
+/// segment when x = p, or when p + s·(x − p) lies in `l` for some s ≥ 1; the axes are
+/// independent given s, and on each axis the s for which some x of `b` works form one
+/// interval, so the test intersects three intervals.
+pub fn meets_hull(p: Vec3, l: &Aabb, b: &Aabb) -> bool {
+    if (p.cmpge(b.min) & p.cmple(b.max)).all() {
+        return true;
+    }
+    let (mut lo, mut hi) = (1.0f32, f32::INFINITY);
+    for axis in 0..3 {
+        let (near, far) = (b.min[axis] - p[axis], b.max[axis] - p[axis]);
+        let (below, above) = (l.min[axis] - p[axis], l.max[axis] - p[axis]);
+        // s·near ≤ above (the low end of the scaled box is not past l), and s·far ≥ below.
+        for (k, c, at_most) in [(near, above, true), (far, below, false)] {
+            if k == 0.0 {
+                if (at_most && c < 0.0) || (!at_most && c > 0.0) {
+                    return false;
+                }
+            } else if (k > 0.0) == at_most {
+                hi = hi.min(c / k);
+            } else {
+                lo = lo.max(c / k);
+            }
+        }
+    }
+    lo <= hi
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Whether any of `n` segments from `p` to random points of `l` touches `b`.
+    fn sampled_hull_meets(p: Vec3, l: &Aabb, b: &Aabb, rng: &mut crate::core::Rng, n: usize) -> bool {
+        (0..n).any(|_| {
+            let u = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
+            let q = l.min + (l.max - l.min) * u;
+            segment_hits_box(p, q - p, 1.0, b)
+        })
+    }
+
+    #[test]
+    fn the_hull_test_is_exact_against_sampled_segments() {
+        // Conservative: whenever a sampled segment from p into l touches b, meets_hull says
+        // so. Tight: when it says so for boxes of real size, dense sampling finds a segment.
+        let mut rng = crate::core::Rng::for_sample(3, 0, 0, 0);
+        let random_box = |rng: &mut crate::core::Rng, size: f32| {
+            let c = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 10.0;
+            let h = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * size + Vec3::splat(0.2);
+            Aabb { min: c - h, max: c + h }
+        };
+        let (mut met, mut missed) = (0, 0);
+        for _ in 0..2000 {
+            let p = Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 10.0;
+            let (l, b) = (random_box(&mut rng, 2.0), random_box(&mut rng, 1.5));
+            let exact = meets_hull(p, &l, &b);
+            let sampled = sampled_hull_meets(p, &l, &b, &mut rng, 4000);
+            assert!(exact || !sampled, "a segment from {p} into {l:?} touches {b:?}, but meets_hull says no");
+            if exact {
+                met += 1;
+                missed += usize::from(!sampled);
+            }
+        }
+        assert!(met > 100, "too few meeting cases to tell: {met}");
+        assert!(missed * 20 < met, "meets_hull said yes {missed} times of {met} where no segment was found");
+    }
+
+    #[test]
+    fn the_hull_is_tighter_than_the_boxes_union() {
+        // A box beside the hull of a point under a light, but inside their bounding box: the
+        // union test flags it, the hull test does not.
+        let light = Aabb { min: Vec3::new(-1.0, 10.0, -1.0), max: Vec3::new(1.0, 10.0, 1.0) };
+        let p = Vec3::new(-5.0, 0.0, 0.0);
+        let aside = Aabb { min: Vec3::new(-1.0, 1.0, -0.5), max: Vec3::new(0.0, 2.0, 0.5) };
+        assert!(!meets_hull(p, &light, &aside));
+        let on_the_way = Aabb { min: Vec3::new(-4.0, 2.0, -0.5), max: Vec3::new(-3.0, 3.0, 0.5) };
+        assert!(meets_hull(p, &light, &on_the_way));
+    }
 
     #[test]
     fn slab_test_against_analytic_cases() {

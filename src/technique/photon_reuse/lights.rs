@@ -225,3 +225,67 @@ pub fn rescale(store: &mut PathStore, l: usize, factor: Rgb) -> Vec<usize> {
     });
     paths
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::scene::edits::{self, Edit, SceneDelta};
+    use crate::scene::{Scene, SceneAccel, Trs};
+    use crate::technique::photon_reuse::{PhotonReuse, PhotonReuseConfig, ReuseMode};
+    use crate::technique::{RenderContext, Technique};
+    use glam::Vec3;
+    use std::path::Path;
+
+    /// The Cornell box (its area light makes every path store its origin) with a movable spot
+    /// light in the middle of the room.
+    fn cornell_with_a_bulb() -> Scene {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+        let text = std::fs::read_to_string(root.join("cornell-box.json")).expect("bundled scene");
+        let mut doc: serde_json::Value = serde_json::from_str(&text).expect("scene JSON");
+        doc["lights"].as_array_mut().expect("lights").push(serde_json::json!({
+            "name": "spot", "dynamic": true,
+            "emitter": { "type": "spot", "intensity": [20000.0, 20000.0, 20000.0], "cone_deg": 30.0 },
+            "transform": { "translation": [278.0, 300.0, 279.5] }
+        }));
+        doc["camera"]["resolution"] = serde_json::json!([16, 16]);
+        let desc = serde_json::from_value(doc).expect("scene");
+        Scene::from_desc(desc, &root, &root).expect("valid scene")
+    }
+
+    #[test]
+    fn every_path_of_a_moved_spot_light_starts_at_its_new_position() {
+        // A spot light that moves and turns leaves paths outside its cone (no power: invalid);
+        // their slots are filled, and the fill took its origin from the path's stored origin,
+        // where the light had been, whenever an area light made the store keep origins.
+        let device = crate::embree::Device::new(2).expect("device");
+        let mut scene = cornell_with_a_bulb();
+        let mut accel = SceneAccel::build(&device, &scene).expect("accel");
+        let config = PhotonReuseConfig { paths: 20_000, reuse: ReuseMode::Naive, ..PhotonReuseConfig::default() };
+        let mut technique = PhotonReuse::new(config, &scene).expect("technique");
+        let spot = scene.light_index("spot").expect("spot");
+        for tick in 0..3u64 {
+            let delta = match tick {
+                0 => SceneDelta::default(),
+                _ => {
+                    // Up 20 and turned 50° each tick: every kept direction leaves the 30° cone.
+                    let was = scene.desc().lights[spot].transform;
+                    let turned = glam::Quat::from_rotation_x(0.87) * glam::Quat::from_array(was.rotation);
+                    let at = [was.translation[0], was.translation[1] + 20.0, was.translation[2]];
+                    let transform = Trs { translation: at, rotation: turned.to_array(), ..was };
+                    let edit = Edit::Light { name: "spot".into(), transform: Some(transform), emitter: None };
+                    edits::apply(&mut scene, vec![edit]).expect("valid edit")
+                }
+            };
+            let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
+            accel.update_instances(&scene, &moved).expect("commit");
+            let ctx = RenderContext { scene: &scene, accel: &accel, seed: 5, tick };
+            technique.update(&ctx, &delta).expect("update");
+        }
+        let here = Vec3::from(scene.desc().lights[spot].transform.translation);
+        let store = technique.store.as_ref().expect("store");
+        let origins = store.origin.as_ref().expect("origins are stored with an area light");
+        let ours: Vec<usize> = (0..store.paths).filter(|&p| store.light[p] as usize == spot).collect();
+        let stale = ours.iter().filter(|&&p| origins[p].distance(here) > 1e-3).count();
+        assert!(technique.pending.filled > 0, "no path was filled: the test would not see a fill");
+        assert_eq!(stale, 0, "{stale} of the spot's {} paths start elsewhere than its position", ours.len());
+    }
+}

@@ -6,9 +6,9 @@
 //! - **Resampled**: the camera ray went through a specular chain, ended on a moved object, or
 //!   may now be crossed by a moved object (its segment against the old and new boxes, widened
 //!   by the pixel's footprint). The sample is taken again through the same jitter.
-//! - **Direct light stale**: a moved box overlaps the hull of the hit (widened by its
-//!   footprint) and a light's bounds, so some shadow ray may now be blocked or freed. Its NEE
-//!   estimates are forgotten.
+//! - **Direct light stale**: a moved box (widened by the pixel's footprint) meets the convex
+//!   hull of the hit and a light's bounds ([`meets_hull`], exact), so some shadow ray may now
+//!   be blocked or freed. Its NEE estimates are forgotten.
 //! - **Indirect light changed**: a photon the grid took out or put in lies within r (plus the
 //!   footprint) of the hit. Its photon sum is updated by splatting exactly those photons, with
 //!   the same term a gather uses, so it equals a fresh gather up to rounding (the sums are
@@ -28,7 +28,7 @@ use crate::core::Rng;
 use crate::film::Film;
 use crate::scene::edits::Aabb;
 use crate::scene::{Scene, SceneAccel};
-use crate::technique::box_tree::{segment_hits_box, widened, BoxTree};
+use crate::technique::box_tree::{meets_hull, segment_hits_box, widened, BoxTree};
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -221,8 +221,15 @@ impl PixelCache {
                     return Fate::Resampled;
                 }
                 let Some(hit) = &s.hit else { return Fate::Kept };
+                // A shadow ray of any sample of this pixel runs from within `reach` of the hit to
+                // a light: inside the hull of the hit and the light, widened by `reach`. The
+                // boxes' union culls first.
                 let around = Aabb { min: hit.p - Vec3::splat(reach), max: hit.p + Vec3::splat(reach) };
-                if moves.lights.iter().any(|l| exact.overlaps(&around.union(l))) {
+                let in_a_shadow_ray = |l: &Aabb| {
+                    exact.overlaps(&around.union(l))
+                        && moves.boxes.iter().any(|b| meets_hull(hit.p, l, &widened(b, moves.slack + reach)))
+                };
+                if moves.lights.iter().any(in_a_shadow_ray) {
                     Fate::DirectStale
                 } else {
                     Fate::Kept

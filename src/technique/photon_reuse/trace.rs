@@ -105,8 +105,11 @@ impl Tracer<'_> {
         let light = store.light[path] as usize;
         let geometry = &self.scene.lights[light].geometry;
         let frame = self.frames.get(light).copied().flatten();
+        // A point or spot light emits from where it is now; the path's stored origin is where
+        // it was when the path was traced (an area light's cell brings its own origin).
+        let here = self.scene.desc().lights[light].transform.translation();
         let in_cell = match (cell, frame) {
-            (Some(c), Some(f)) => f.sample_in_cell(c, path_origin(self.scene, store, path), rng),
+            (Some(c), Some(f)) => f.sample_in_cell(c, here, rng),
             _ => None,
         };
         let (origin, dir, weight) = match in_cell {
