@@ -49,6 +49,8 @@ pub struct Changes {
     pub boxes: BoxTree,
     /// At most `COVER_BOXES` boxes containing all of `boxes`.
     cover: Vec<Aabb>,
+    /// The box containing the cover: most segments miss it, and then every cover box.
+    cover_bounds: Option<Aabb>,
     /// `moved[object]`: the object moved this tick.
     pub moved: Vec<bool>,
     /// `translated[object]`: it moved without turning or scaling, so its surface normals and
@@ -85,7 +87,8 @@ impl Changes {
         let flagged = moved.iter().zip(&previous_material).map(|(&m, p)| m || p.is_some()).collect();
         let boxes = BoxTree::new(boxes);
         let cover = boxes.cover(COVER_BOXES);
-        Changes { boxes, cover, moved, translated, previous_material, flagged }
+        let cover_bounds = cover.iter().copied().reduce(|a, b| a.union(&b));
+        Changes { boxes, cover, cover_bounds, moved, translated, previous_material, flagged }
     }
 
     /// Whether the segment from `start` to `end` may touch the cover. A finite segment lies in
@@ -93,7 +96,11 @@ impl Changes {
     #[inline]
     fn cover_touched(&self, start: Vec3, end: Vec3) -> bool {
         let (lo, hi) = (start.min(end), start.max(end));
-        let near = self.cover.iter().any(|b| b.min.cmple(hi).all() && lo.cmple(b.max).all());
+        let overlaps = |b: &Aabb| b.min.cmple(hi).all() && lo.cmple(b.max).all();
+        if !self.cover_bounds.as_ref().is_some_and(overlaps) {
+            return false;
+        }
+        let near = self.cover.iter().any(overlaps);
         near && {
             let segment = Segment::new(start, end - start, 1.0);
             self.cover.iter().any(|b| segment.touches(b))
