@@ -133,19 +133,27 @@ impl Worker {
     /// Runs a tick for the clients waiting for one, if any are (a scheduled tick may have
     /// answered them already), and answers them all.
     fn tick_for_waiters(&mut self) {
-        let waiters = self.tick_waiters.lock().map(|mut w| std::mem::take(&mut *w)).unwrap_or_default();
-        if waiters.is_empty() {
-            return;
-        }
-        let result = self.tick();
-        for reply in waiters {
-            let _ = reply.send(result.clone());
+        let waiters = self.take_waiters();
+        if !waiters.is_empty() {
+            let _ = self.tick_answering(waiters);
         }
     }
 
     /// A scheduled tick; clients waiting for a tick get its stats too.
     fn scheduled_tick(&mut self) -> Result<TickStats, ApiError> {
-        let waiters = self.tick_waiters.lock().map(|mut w| std::mem::take(&mut *w)).unwrap_or_default();
+        let waiters = self.take_waiters();
+        self.tick_answering(waiters)
+    }
+
+    fn take_waiters(&self) -> Vec<oneshot::Sender<Result<TickStats, ApiError>>> {
+        self.tick_waiters.lock().map(|mut w| std::mem::take(&mut *w)).unwrap_or_default()
+    }
+
+    /// Runs one tick and gives its result to every one of `waiters` too.
+    fn tick_answering(
+        &mut self,
+        waiters: Vec<oneshot::Sender<Result<TickStats, ApiError>>>,
+    ) -> Result<TickStats, ApiError> {
         let result = self.tick();
         for reply in waiters {
             let _ = reply.send(result.clone());
