@@ -27,7 +27,7 @@
 //! changed, draws its roulette again there (a fresh tail). Keeping the old verdict would bias
 //! the estimate low: the path would go on with probability q_old·q_new instead of q_new.
 use super::store::PathStore;
-use super::trace::{leaving, path_origin, photon_at, surface_normal, Photon, Retrace};
+use super::trace::{leaving, path_origin, photon_at, put_photon, surface_normal, Photon, Retrace};
 use super::verify::Changes;
 use crate::core::Rgb;
 use crate::embree::Ray;
@@ -95,8 +95,9 @@ pub fn check_path(
     let mut updated: Option<Photon> = None;
     for k in 0..segments {
         // Only the end's position and object are read until a ray is needed.
-        let stored_end =
-            (k < photons).then(|| (store.rows[k as usize].position[path], store.rows[k as usize].object[path]));
+        let stored_end = (k < photons).then(|| {
+            (store.rows[k as usize].position[path], store.surfaces.object(store.rows[k as usize].surface[path]))
+        });
         let (dir, t_max) = match stored_end {
             Some((position, _)) => (position - start, 1.0),
             None => (escape, f32::INFINITY),
@@ -257,11 +258,8 @@ fn continuation(stayed: bool, keeps: bool, next: u32) -> Retrace {
 /// shortened paths. Returns the retrace still to do.
 pub fn apply(store: &mut PathStore, path: usize, checked: Checked) -> Option<Retrace> {
     for (row, p) in checked.moved {
-        let r = &mut store.rows[row as usize];
-        r.position[path] = p.position;
-        r.incoming[path] = p.incoming;
-        r.object[path] = p.object;
-        r.prim[path] = p.prim;
+        let power = store.rows[row as usize].power[path];
+        put_photon(store, row as usize, path, &Photon { power, ..p });
     }
     match checked.outcome {
         Outcome::Valid => None,

@@ -143,12 +143,13 @@ fn photon_at(
         return None;
     }
     let row = &store.rows[row_index];
-    if !diffuse[row.object[path] as usize] {
+    let (object, prim) = store.surfaces.object_and_prim(row.surface[path]);
+    if !diffuse[object as usize] {
         return None;
     }
-    let [a, b, c] = scene.triangle(SurfaceId::Object(row.object[path]), row.prim[path]);
+    let [a, b, c] = scene.triangle(SurfaceId::Object(object), prim);
     let n = (b - a).cross(c - a).normalize_or_zero();
-    let incoming = row.incoming[path];
+    let incoming = row.incoming[path].get();
     let photon = GridPhoton {
         position: row.position[path],
         facing: if n.dot(incoming) < 0.0 { n } else { -n },

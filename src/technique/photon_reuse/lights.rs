@@ -30,7 +30,7 @@
 use super::distribution::{DistributionMap, EmissionFrame};
 use super::store::PathStore;
 use super::trace::{photon_at, surface_normal, Retrace};
-use crate::core::{Rgb, Rng};
+use crate::core::{PackedDir, Rgb, Rng};
 use crate::embree::Ray;
 use crate::scene::{Scene, SceneAccel};
 use crate::technique::nee::SHADOW_EPSILON;
@@ -128,7 +128,7 @@ pub fn apply_moved(store: &mut PathStore, path: usize, origin: Vec3, dir: Vec3, 
     store.emit_dir[path] = dir;
     store.word[path] = store.word[path].with_cell(cell).with_reused_light(true);
     if store.word[path].photons() > 0 {
-        store.rows[0].incoming[path] = dir;
+        store.rows[0].incoming[path] = PackedDir::new(dir);
     }
     if scale == Rgb::WHITE {
         return false;

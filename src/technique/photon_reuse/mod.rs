@@ -108,6 +108,7 @@ use lights::{MappedLight, Moved};
 use pixels::{Moves, PixelCache};
 use rayon::prelude::*;
 use std::time::Instant;
+use store::SurfaceIds;
 use trace::{Retrace, TracedTail, Tracer};
 use verify::{Changes, Standing};
 
@@ -126,6 +127,8 @@ enum Plan {
 /// The `photon_reuse` technique.
 pub struct PhotonReuse {
     config: PhotonReuseConfig,
+    /// Surface ids of the scene's triangles (their meshes never change in a session).
+    surfaces: SurfaceIds,
     store: Option<PathStore>,
     paths_per_light: Vec<u32>,
     /// Distribution maps of lights that have moved at least once.
@@ -153,10 +156,15 @@ fn ms(since: Instant) -> f64 {
 }
 
 impl PhotonReuse {
-    pub fn new(config: PhotonReuseConfig, _scene: &Scene) -> Result<PhotonReuse, TechniqueError> {
+    pub fn new(config: PhotonReuseConfig, scene: &Scene) -> Result<PhotonReuse, TechniqueError> {
         config.validate()?;
+        let surfaces = SurfaceIds::of(scene).ok_or_else(|| TechniqueError::TooLarge {
+            field: "objects".into(),
+            message: "the objects' triangles do not fit photon_reuse's 32-bit surface ids".into(),
+        })?;
         Ok(PhotonReuse {
             config,
+            surfaces,
             store: None,
             paths_per_light: Vec::new(),
             maps: Vec::new(),
@@ -177,7 +185,7 @@ impl PhotonReuse {
         let scene = ctx.scene;
         let n = self.config.paths as usize;
         let with_origins = scene.lights.iter().any(|l| l.mesh.is_some());
-        let mut store = PathStore::new(n, self.config.max_photons as usize, with_origins);
+        let mut store = PathStore::new(n, self.config.max_photons as usize, with_origins, self.surfaces.clone());
         self.paths_per_light = vec![0; scene.lights.len()];
         self.maps = (0..scene.lights.len()).map(|_| None).collect();
         if let Some(select) = &scene.light_selection {

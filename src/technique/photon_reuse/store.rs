@@ -6,47 +6,99 @@
 //! photon k. A path whose last segment left the scene keeps that segment's direction
 //! (`escape`), so an object moving into it is still noticed. Units: positions in meters, power
 //! in watts (flux per photon), directions unit length.
-use crate::core::Rgb;
+use crate::core::{PackedDir, Rgb};
+use crate::scene::Scene;
 use glam::Vec3;
 
-/// Row i of the store: photon i of every path.
+/// Row i of the store: photon i of every path, 32 bytes per photon as in the paper's Table 1.
 #[derive(Clone, Debug, Default)]
 pub struct PhotonRow {
     pub position: Vec<Vec3>,
-    /// Direction of travel arriving at the photon (pointing into the surface).
-    pub incoming: Vec<Vec3>,
-    /// Object index of the surface the photon lies on.
-    pub object: Vec<u32>,
-    /// Triangle of that object (for the surface normal when a ray leaves the photon).
-    pub prim: Vec<u32>,
+    /// Direction of travel arriving at the photon (pointing into the surface), packed.
+    pub incoming: Vec<PackedDir>,
+    /// The object and triangle the photon lies on, as one id ([`SurfaceIds`]); the triangle
+    /// gives the surface normal when a ray leaves the photon.
+    pub surface: Vec<u32>,
     /// Flux arriving with the photon.
     pub power: Vec<Rgb>,
 }
 
 impl PhotonRow {
-    /// Bytes per photon: position, incoming, object, triangle and power.
-    pub const BYTES_PER_PHOTON: u64 =
-        (2 * std::mem::size_of::<Vec3>() + 2 * std::mem::size_of::<u32>() + std::mem::size_of::<Rgb>()) as u64;
+    /// Bytes per photon: position, packed incoming direction, surface id and power.
+    pub const BYTES_PER_PHOTON: u64 = (std::mem::size_of::<Vec3>()
+        + std::mem::size_of::<PackedDir>()
+        + std::mem::size_of::<u32>()
+        + std::mem::size_of::<Rgb>()) as u64;
 
     fn with_len(n: usize) -> PhotonRow {
         PhotonRow {
             position: vec![Vec3::ZERO; n],
-            incoming: vec![Vec3::ZERO; n],
-            object: vec![0; n],
-            prim: vec![0; n],
+            incoming: vec![PackedDir::NONE; n],
+            surface: vec![0; n],
             power: vec![Rgb::BLACK; n],
         }
     }
 
-    /// Heap bytes the row holds (position, incoming, object, triangle, power). The paper's
-    /// photon is 32 bytes (no triangle, a radius instead); the triangle buys robust ray offsets
-    /// when a path is retraced from a stored photon, and the radius is global here.
+    /// Heap bytes the row holds. The paper's photon is 32 bytes too (a radius where this one
+    /// has its surface id; the radius is global here): the surface id buys robust ray offsets
+    /// when a path is retraced from a stored photon.
     fn heap_bytes(&self) -> u64 {
-        heap_bytes(&self.position)
-            + heap_bytes(&self.incoming)
-            + heap_bytes(&self.object)
-            + heap_bytes(&self.prim)
-            + heap_bytes(&self.power)
+        heap_bytes(&self.position) + heap_bytes(&self.incoming) + heap_bytes(&self.surface) + heap_bytes(&self.power)
+    }
+}
+
+/// One 32-bit id per (object, triangle), decoded in O(1). Ids come in blocks of 2^`shift`;
+/// each object starts on a block boundary, so one table lookup by `id >> shift` names the
+/// object. `shift` is the smallest that keeps the table within [`SurfaceIds::MAX_BLOCKS`] (or
+/// two per object), so it stays in cache. Objects keep their meshes for a session's life (edits
+/// move them, never reshape them), so the ids made at the first tick stay valid.
+#[derive(Clone, Debug, Default)]
+pub struct SurfaceIds {
+    shift: u32,
+    /// `first[o]`: the id of object o's triangle 0.
+    first: Vec<u32>,
+    /// The object each block of ids belongs to.
+    object_of_block: Vec<u32>,
+}
+
+impl SurfaceIds {
+    /// Largest table of blocks, unless the scene has more objects than half of it.
+    pub const MAX_BLOCKS: u64 = 4096;
+
+    /// The ids of `scene`'s triangles, or `None` when they do not fit in 32 bits (the scene's
+    /// triangle limit keeps them far below).
+    pub fn of(scene: &Scene) -> Option<SurfaceIds> {
+        let triangles: Vec<u64> = scene.objects.iter().map(|o| o.mesh.triangles.len() as u64).collect();
+        Self::for_counts(&triangles)
+    }
+
+    /// The ids of objects with these triangle counts.
+    fn for_counts(triangles: &[u64]) -> Option<SurfaceIds> {
+        let blocks = |shift: u32| triangles.iter().map(|&t| t.div_ceil(1 << shift)).sum::<u64>();
+        let limit = Self::MAX_BLOCKS.max(2 * triangles.len() as u64);
+        let shift = (0..32).find(|&s| blocks(s) <= limit)?;
+        if blocks(shift) << shift > u64::from(u32::MAX) {
+            return None;
+        }
+        let mut ids = SurfaceIds { shift, first: Vec::with_capacity(triangles.len()), object_of_block: Vec::new() };
+        for (object, &t) in triangles.iter().enumerate() {
+            ids.first.push((ids.object_of_block.len() as u32) << shift);
+            ids.object_of_block.extend(std::iter::repeat_n(object as u32, t.div_ceil(1 << shift) as usize));
+        }
+        Some(ids)
+    }
+
+    pub fn id(&self, object: u32, prim: u32) -> u32 {
+        self.first[object as usize] + prim
+    }
+
+    pub fn object(&self, id: u32) -> u32 {
+        self.object_of_block[(id >> self.shift) as usize]
+    }
+
+    pub fn object_and_prim(&self, id: u32) -> (u32, u32) {
+        let object = self.object(id);
+        (object, id - self.first[object as usize])
     }
 }
 
@@ -129,6 +181,8 @@ pub struct PathStore {
     pub escape: Vec<Vec3>,
     /// Bumped whenever the path is retraced, so the new tail draws fresh random numbers.
     pub generation: Vec<u32>,
+    /// How the rows' surface ids map to objects and triangles.
+    pub surfaces: SurfaceIds,
 }
 
 /// Bytes per structure, reported in the stats.
@@ -169,7 +223,7 @@ impl StoreMemory {
 }
 
 impl PathStore {
-    pub fn new(paths: usize, max_photons: usize, with_origins: bool) -> PathStore {
+    pub fn new(paths: usize, max_photons: usize, with_origins: bool, surfaces: SurfaceIds) -> PathStore {
         PathStore {
             paths,
             max_photons,
@@ -181,6 +235,7 @@ impl PathStore {
             emit_power: vec![Rgb::BLACK; paths],
             escape: vec![Vec3::ZERO; paths],
             generation: vec![0; paths],
+            surfaces,
         }
     }
 
@@ -229,13 +284,31 @@ mod tests {
     }
 
     #[test]
+    fn surface_ids_round_trip_and_keep_their_table_small() {
+        // Property: every (object, triangle) decodes to itself, objects without triangles
+        // included, and the block table stays within its bound. The counts make the first
+        // shift that fits the bound something other than 0. Negative control: ids that do
+        // not fit 32 bits are refused.
+        let counts = [5u64, 0, 70_000, 1, 0, 3, 200_000, 9];
+        let ids = SurfaceIds::for_counts(&counts).expect("fits");
+        assert!(ids.shift > 0 && ids.object_of_block.len() as u64 <= SurfaceIds::MAX_BLOCKS);
+        for (object, &n) in counts.iter().enumerate() {
+            for prim in [0, 1, n / 2, n.saturating_sub(1)].into_iter().filter(|&p| p < n) {
+                let id = ids.id(object as u32, prim as u32);
+                assert_eq!(ids.object_and_prim(id), (object as u32, prim as u32));
+            }
+        }
+        assert!(SurfaceIds::for_counts(&[u64::from(u32::MAX), 2]).is_none());
+    }
+
+    #[test]
     fn memory_grows_with_paths_and_bounces_and_origins_only_when_asked() {
-        let base = PathStore::new(1000, 7, false).memory();
-        assert_eq!(PathStore::new(2000, 7, false).memory().photon_map, 2 * base.photon_map);
-        assert_eq!(PathStore::new(1000, 14, false).memory().photon_map, 2 * base.photon_map);
-        assert_eq!(PathStore::new(1000, 14, false).memory().path_words, base.path_words);
+        let base = PathStore::new(1000, 7, false, SurfaceIds::default()).memory();
+        assert_eq!(PathStore::new(2000, 7, false, SurfaceIds::default()).memory().photon_map, 2 * base.photon_map);
+        assert_eq!(PathStore::new(1000, 14, false, SurfaceIds::default()).memory().photon_map, 2 * base.photon_map);
+        assert_eq!(PathStore::new(1000, 14, false, SurfaceIds::default()).memory().path_words, base.path_words);
         assert_eq!(base.origins, 0);
-        let with = PathStore::new(1000, 7, true).memory();
+        let with = PathStore::new(1000, 7, true, SurfaceIds::default()).memory();
         assert!(with.origins > 0 && with.total() == base.total() + with.origins);
     }
 }

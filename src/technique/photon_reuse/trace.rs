@@ -7,7 +7,7 @@
 //! is a straight line between consecutive rows.
 use super::distribution::EmissionFrame;
 use super::store::PathStore;
-use crate::core::{offset_ray_origin, Rgb, Rng};
+use crate::core::{offset_ray_origin, PackedDir, Rgb, Rng};
 use crate::embree::Ray;
 use crate::scene::{Scene, SceneAccel, SurfaceId};
 use glam::Vec3;
@@ -71,13 +71,8 @@ pub struct TracedTail {
 
 pub fn photon_at(store: &PathStore, path: usize, row: usize) -> Photon {
     let r = &store.rows[row];
-    Photon {
-        position: r.position[path],
-        incoming: r.incoming[path],
-        object: r.object[path],
-        prim: r.prim[path],
-        power: r.power[path],
-    }
+    let (object, prim) = store.surfaces.object_and_prim(r.surface[path]);
+    Photon { position: r.position[path], incoming: r.incoming[path].get(), object, prim, power: r.power[path] }
 }
 
 /// The start of segment 0 of a path.
@@ -241,6 +236,16 @@ fn scatter(scene: &Scene, p: &Photon, rng: &mut Rng, roulette: bool) -> Option<(
     Some((offset_towards(p.position, n, bs.wi), bs.wi, p.power * bs.weight / q))
 }
 
+/// Writes photon `p` into row `row` of path `path`.
+pub fn put_photon(store: &mut PathStore, row: usize, path: usize, p: &Photon) {
+    let id = store.surfaces.id(p.object, p.prim);
+    let r = &mut store.rows[row];
+    r.position[path] = p.position;
+    r.incoming[path] = PackedDir::new(p.incoming);
+    r.surface[path] = id;
+    r.power[path] = p.power;
+}
+
 /// Writes traced tails back into the store.
 pub fn write_back(store: &mut PathStore, tails: Vec<TracedTail>) {
     for t in tails {
@@ -258,12 +263,7 @@ pub fn write_back(store: &mut PathStore, tails: Vec<TracedTail>) {
             store.emit_power[i] = p;
         }
         for (k, ph) in t.photons.iter().enumerate() {
-            let r = &mut store.rows[t.from as usize + k];
-            r.position[i] = ph.position;
-            r.incoming[i] = ph.incoming;
-            r.object[i] = ph.object;
-            r.prim[i] = ph.prim;
-            r.power[i] = ph.power;
+            put_photon(store, t.from as usize + k, i, ph);
         }
         store.word[i] = store.word[i].cleared().with_photons(t.from + t.photons.len() as u32);
         store.escape[i] = t.escape;

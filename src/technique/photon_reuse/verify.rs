@@ -148,14 +148,14 @@ fn screen_chunk(
     for k in 0..store.max_photons.min(15) {
         let starts = if k == 0 { &origins[..] } else { &store.rows[k - 1].position[range.clone()] };
         let row = &store.rows[k];
-        let ends = row.position[range.clone()].iter().zip(&row.object[range.clone()]);
-        for ((((mask, word), &start), (&end, &object)), standing) in
+        let ends = row.position[range.clone()].iter().zip(&row.surface[range.clone()]);
+        for ((((mask, word), &start), (&end, &surface)), standing) in
             masks.iter_mut().zip(words).zip(starts).zip(ends).zip(standing)
         {
             if k >= word.photons() as usize {
                 continue;
             }
-            if changes.flagged[object as usize] {
+            if changes.flagged[store.surfaces.object(surface) as usize] {
                 *mask |= 1 << k;
                 continue;
             }
@@ -220,7 +220,7 @@ pub fn check_path(
             return (Some(Retrace::KeepSegment(k)), tests);
         }
         if ends_on_photon {
-            let object = store.rows[k as usize].object[path] as usize;
+            let object = store.surfaces.object(store.rows[k as usize].surface[path]) as usize;
             // The segment ends on an object that moved: its end point is stale.
             if changes.moved[object] {
                 return (Some(Retrace::KeepSegment(k)), tests);
