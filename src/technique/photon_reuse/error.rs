@@ -29,7 +29,7 @@
 use super::store::PathStore;
 use super::trace::{leaving, path_origin, photon_at, put_photon, surface_normal, Photon, Retrace};
 use super::verify::Changes;
-use crate::core::Rgb;
+use crate::core::{PackedDir, Rgb};
 use crate::embree::Ray;
 use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
 use glam::Vec3;
@@ -81,7 +81,7 @@ pub fn check_path(
     mask: u16,
 ) -> Checked {
     let photons = store.word[path].photons();
-    let escape = store.escape[path];
+    let escape = store.escape[path].get();
     let segments = photons + u32::from(escape != Vec3::ZERO);
     let mut out = Checked { outcome: Outcome::Valid, moved: Vec::new(), rays: 0, tests: 0 };
     let material_of = |object: u32| &scene.materials[scene.objects[object as usize].material as usize];
@@ -266,7 +266,7 @@ pub fn apply(store: &mut PathStore, path: usize, checked: Checked) -> Option<Ret
         Outcome::Retrace(r) => Some(r),
         Outcome::End { photons, escape } => {
             store.word[path] = store.word[path].with_photons(photons);
-            store.escape[path] = escape;
+            store.escape[path] = PackedDir::new(escape);
             None
         }
     }

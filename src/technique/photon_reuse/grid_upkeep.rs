@@ -21,7 +21,7 @@ impl PhotonReuse {
         if count == 0 || self.base_radius <= 0.0 {
             return false;
         }
-        let unmapped = |i: usize| self.maps.get(store.light[i] as usize).is_none_or(|m| m.is_none());
+        let unmapped = |i: usize| self.maps.get(store.light_of(i)).is_none_or(|m| m.is_none());
         let work: Vec<(usize, Retrace)> = (0..count.min(store.paths))
             .map(|k| (self.refine_cursor + k) % store.paths)
             .filter(|&i| unmapped(i))

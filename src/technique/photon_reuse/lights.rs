@@ -42,12 +42,12 @@ const PRUNE_STREAM: u64 = 0x0050_5255_4e45; // "PRUNE"
 const FILL_STREAM: u64 = 0x4649_4c4c; // "FILL"
 
 /// A light with a distribution map: its frame as of the current tick, its map, and the path
-/// slots it owns (fixed at the first tick).
+/// slots it owns (its contiguous paths, fixed when they were assigned).
 #[derive(Clone, Debug)]
 pub struct MappedLight {
     pub frame: EmissionFrame,
     pub map: DistributionMap,
-    pub slots: Vec<u32>,
+    pub slots: std::ops::Range<usize>,
 }
 
 /// Where a path stands after its light moved.
@@ -70,7 +70,7 @@ pub fn update_origin(
     old_world_from_object: Affine3A,
     paths_of_light: u32,
 ) -> (Moved, u64) {
-    let light = store.light[path] as usize;
+    let light = store.light_of(path);
     let geometry = &scene.lights[light].geometry;
     let photons = store.word[path].photons();
     let old_power = store.emit_power[path];
@@ -81,13 +81,16 @@ pub fn update_origin(
     let first = (photons > 0).then(|| photon_at(store, path, 0));
     let placed = match (&first, frame.is_area(), &store.origin) {
         (Some(p), false, _) => Some((position, (p.position - position).normalize_or_zero())),
-        (None, false, _) => Some((position, store.emit_dir[path])),
+        (None, false, _) => Some((position, store.emit_dir[path].get())),
         (Some(p), true, _) => {
-            frame.origin_on_plane(p.position, store.emit_dir[path]).map(|o| (o, store.emit_dir[path]))
+            frame.origin_on_plane(p.position, store.emit_dir[path].get()).map(|o| (o, store.emit_dir[path].get()))
         }
         (None, true, Some(origins)) => {
             let moved = frame.world_from_object() * old_world_from_object.inverse();
-            Some((moved.transform_point3(origins[path]), moved.transform_vector3(store.emit_dir[path]).normalize()))
+            Some((
+                moved.transform_point3(origins[path]),
+                moved.transform_vector3(store.emit_dir[path].get()).normalize(),
+            ))
         }
         (None, true, None) => None,
     };
@@ -109,7 +112,7 @@ pub fn update_origin(
         Some(Retrace::KeepSegment(0))
     } else {
         first.and_then(|p| {
-            let reflects = photons > 1 || store.escape[path] != Vec3::ZERO;
+            let reflects = photons > 1 || store.escape[path] != PackedDir::NONE;
             let n = surface_normal(scene, &p);
             let material = &scene.materials[scene.objects[p.object as usize].material as usize];
             let flipped = n.dot(p.incoming).signum() != n.dot(dir).signum();
@@ -125,7 +128,7 @@ pub fn apply_moved(store: &mut PathStore, path: usize, origin: Vec3, dir: Vec3, 
     if let Some(origins) = &mut store.origin {
         origins[path] = origin;
     }
-    store.emit_dir[path] = dir;
+    store.emit_dir[path] = PackedDir::new(dir);
     store.word[path] = store.word[path].with_cell(cell).with_reused_light(true);
     if store.word[path].photons() > 0 {
         store.rows[0].incoming[path] = PackedDir::new(dir);
@@ -151,19 +154,20 @@ pub struct Balance {
 /// Steps 3–5 for one light: counts the valid paths (`valid[i]` for `slots[i]`), prunes, and
 /// fills the freed slots. The map's DM_C is left as it will be once the fills are traced.
 pub fn balance(lm: &mut MappedLight, store: &PathStore, valid: &[bool], seed: u64, tick: u64, light: usize) -> Balance {
-    let (map, slots) = (&mut lm.map, &lm.slots);
+    let (map, slots) = (&mut lm.map, lm.slots.clone());
     map.current.iter_mut().for_each(|c| *c = 0);
-    for (&slot, &ok) in slots.iter().zip(valid) {
+    for (slot, &ok) in slots.clone().zip(valid) {
         if ok {
-            map.current[store.word[slot as usize].cell() as usize] += 1;
+            map.current[store.word[slot].cell() as usize] += 1;
         }
     }
     // Prune: mark with the counts as they were, then count the marked paths out.
     let pruned: Vec<bool> = slots
-        .par_iter()
+        .clone()
+        .into_par_iter()
         .zip(valid)
-        .map(|(&slot, &ok)| {
-            let cell = store.word[slot as usize].cell() as usize;
+        .map(|(slot, &ok)| {
+            let cell = store.word[slot].cell() as usize;
             let (c, t) = (map.current[cell], map.target[cell]);
             ok && c > t && {
                 let mut rng = Rng::for_sample(seed, tick, slot as u64, PRUNE_STREAM);
@@ -173,13 +177,13 @@ pub fn balance(lm: &mut MappedLight, store: &PathStore, valid: &[bool], seed: u6
         .collect();
     let mut free = Vec::new();
     let mut out = Balance::default();
-    for ((&slot, &ok), &cut) in slots.iter().zip(valid).zip(&pruned) {
+    for ((slot, &ok), &cut) in slots.zip(valid).zip(&pruned) {
         if cut {
-            map.current[store.word[slot as usize].cell() as usize] -= 1;
+            map.current[store.word[slot].cell() as usize] -= 1;
             out.pruned += 1;
         }
         if cut || !ok {
-            free.push(slot as usize);
+            free.push(slot);
         }
     }
     // Fill: one missing path per free slot, at random when slots are short.
@@ -211,7 +215,7 @@ pub fn balance(lm: &mut MappedLight, store: &PathStore, valid: &[bool], seed: u6
 /// Scales every flux light `l`'s paths carry, their segment-0 flux and every photon's, by
 /// `factor` per channel. No rays. Returns the paths it changed.
 pub fn rescale(store: &mut PathStore, l: usize, factor: Rgb) -> Vec<usize> {
-    let paths: Vec<usize> = (0..store.paths).into_par_iter().filter(|&i| store.light[i] as usize == l).collect();
+    let paths: Vec<usize> = store.paths_of(l).collect();
     let photons: Vec<u32> = paths.iter().map(|&i| store.word[i].photons()).collect();
     for &i in &paths {
         store.emit_power[i] *= factor;
@@ -283,7 +287,7 @@ mod tests {
         let here = Vec3::from(scene.desc().lights[spot].transform.translation);
         let store = technique.store.as_ref().expect("store");
         let origins = store.origin.as_ref().expect("origins are stored with an area light");
-        let ours: Vec<usize> = (0..store.paths).filter(|&p| store.light[p] as usize == spot).collect();
+        let ours: Vec<usize> = store.paths_of(spot).collect();
         let stale = ours.iter().filter(|&&p| origins[p].distance(here) > 1e-3).count();
         assert!(technique.pending.filled > 0, "no path was filled: the test would not see a fill");
         assert_eq!(stale, 0, "{stale} of the spot's {} paths start elsewhere than its position", ours.len());

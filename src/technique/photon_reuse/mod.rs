@@ -131,6 +131,8 @@ pub struct PhotonReuse {
     surfaces: SurfaceIds,
     store: Option<PathStore>,
     paths_per_light: Vec<u32>,
+    /// Retrace passes so far: the key of each pass's random streams.
+    retrace_passes: u64,
     /// Distribution maps of lights that have moved at least once.
     maps: Vec<Option<MappedLight>>,
     grid: PhotonGrid,
@@ -167,6 +169,7 @@ impl PhotonReuse {
             surfaces,
             store: None,
             paths_per_light: Vec::new(),
+            retrace_passes: 0,
             maps: Vec::new(),
             grid: PhotonGrid::default(),
             base_radius: 0.0,
@@ -191,10 +194,12 @@ impl PhotonReuse {
         if let Some(select) = &scene.light_selection {
             for i in 0..n {
                 let (light, _, _) = select.sample((i as f32 + 0.5) / n as f32);
-                store.light[i] = light as u16;
                 self.paths_per_light[light] += 1;
             }
         }
+        store.assign(&self.paths_per_light);
+        // A fresh store restarts the passes, so a rebuilt store draws what a first one would.
+        self.retrace_passes = 0;
         let all: Vec<(usize, Retrace)> =
             if scene.light_selection.is_some() { (0..n).map(|i| (i, Retrace::Emit)).collect() } else { Vec::new() };
         self.retrace(ctx, &mut store, &all, &mut Vec::new());
@@ -221,6 +226,7 @@ impl PhotonReuse {
         touched: &mut Vec<usize>,
     ) {
         touched.extend(work.iter().map(|&(path, _)| path));
+        self.retrace_passes += 1;
         // Mark first (§4's replace flag and segment), so what is pending is visible in the word.
         for &(path, how) in work {
             store.word[path] = store.word[path].retrace(how.first_segment());
@@ -232,6 +238,7 @@ impl PhotonReuse {
             seed: ctx.seed,
             paths_per_light: &self.paths_per_light,
             frames: &frames,
+            epoch: self.retrace_passes,
         };
         let (fills, others): (Vec<_>, Vec<_>) = work.iter().partition(|(_, r)| matches!(r, Retrace::Fill(_)));
         for (list, is_fill) in [(others, false), (fills, true)] {
@@ -317,7 +324,7 @@ impl PhotonReuse {
         let mut valid_of_light: Vec<Option<Vec<bool>>> = vec![None; lights];
         for l in 0..lights {
             if reemit[l] {
-                for i in (0..store.paths).filter(|&i| store.light[i] as usize == l) {
+                for i in store.paths_of(l) {
                     plan[i] = Some(Retrace::Emit);
                     standing[i] = Standing::Decided;
                 }
@@ -327,7 +334,7 @@ impl PhotonReuse {
                 valid_of_light[l] = self.move_light(ctx, store, l, old, &mut plan, &mut standing, touched);
                 changed = true;
             } else if let Some(m) = self.maps[l].as_ref().filter(|m| !m.map.settled()) {
-                valid_of_light[l] = Some(m.slots.iter().map(|&s| !store.emit_power[s as usize].is_black()).collect());
+                valid_of_light[l] = Some(m.slots.clone().map(|s| !store.emit_power[s].is_black()).collect());
             }
         }
         self.pending.origins_ms = ms(t);
@@ -376,8 +383,7 @@ impl PhotonReuse {
         let mapped = match self.maps[l].take() {
             Some(m) => MappedLight { frame, ..m },
             None => {
-                let slots: Vec<u32> =
-                    (0..store.paths as u32).filter(|&i| store.light[i as usize] as usize == l).collect();
+                let slots = store.paths_of(l);
                 let map = DistributionMap::new(frame.targets(slots.len() as u32));
                 MappedLight { frame, map, slots }
             }
@@ -385,14 +391,12 @@ impl PhotonReuse {
         let paths_of_light = self.paths_per_light[l];
         let moved: Vec<(Moved, u64)> = mapped
             .slots
-            .par_iter()
-            .map(|&s| {
-                lights::update_origin(ctx.scene, ctx.accel, store, s as usize, &mapped.frame, old, paths_of_light)
-            })
+            .clone()
+            .into_par_iter()
+            .map(|s| lights::update_origin(ctx.scene, ctx.accel, store, s, &mapped.frame, old, paths_of_light))
             .collect();
         let mut valid = Vec::with_capacity(moved.len());
-        for (&slot, (outcome, rays)) in mapped.slots.iter().zip(moved) {
-            let slot = slot as usize;
+        for (slot, (outcome, rays)) in mapped.slots.clone().zip(moved) {
             self.pending.origin_rays += rays;
             match outcome {
                 Moved::Kept { origin, dir, scale, cell, retrace } => {
@@ -522,7 +526,6 @@ impl Technique for PhotonReuse {
         p.untouched = p.paths.saturating_sub(p.partly_retraced + p.fully_retraced);
         p.store = store.memory();
         p.store.distribution_maps = self.maps.iter().flatten().map(|m| m.map.memory_bytes()).sum();
-        p.store.light_slots = self.maps.iter().flatten().map(|m| m.slots.len() as u64 * 4).sum();
         if let Some((chi2, cells)) = self
             .maps
             .iter()

@@ -168,19 +168,18 @@ pub struct PathStore {
     /// `rows[i]` holds photon i of every path.
     pub rows: Vec<PhotonRow>,
     pub word: Vec<PathWord>,
-    /// Which light emitted the path.
-    pub light: Vec<u16>,
+    /// Each light's paths are contiguous: light l owns `light_end[l − 1]..light_end[l]`
+    /// (fixed when the paths are assigned), so no path stores its light.
+    light_end: Vec<u32>,
     /// Emission point: stored only when some light has a shape (area lights); point and spot
     /// paths start at their light's position.
     pub origin: Option<Vec<Vec3>>,
-    /// Direction and flux of segment 0.
-    pub emit_dir: Vec<Vec3>,
+    /// Direction (packed) and flux of segment 0.
+    pub emit_dir: Vec<PackedDir>,
     pub emit_power: Vec<Rgb>,
-    /// Direction of the last segment if it left the scene or ended on a light; zero if the path
-    /// ended at its last photon (roulette or B).
-    pub escape: Vec<Vec3>,
-    /// Bumped whenever the path is retraced, so the new tail draws fresh random numbers.
-    pub generation: Vec<u32>,
+    /// Direction of the last segment if it left the scene or ended on a light; NONE if the
+    /// path ended at its last photon (roulette or B).
+    pub escape: Vec<PackedDir>,
     /// How the rows' surface ids map to objects and triangles.
     pub surfaces: SurfaceIds,
 }
@@ -192,11 +191,8 @@ pub struct StoreMemory {
     pub path_words: u64,
     pub origins: u64,
     pub segment0_and_escape: u64,
-    pub generations: u64,
     /// DM_T and DM_C of lights that have moved (none for lights that never moved).
     pub distribution_maps: u64,
-    /// Path slots of lights with a map.
-    pub light_slots: u64,
 }
 
 impl StoreMemory {
@@ -208,9 +204,7 @@ impl StoreMemory {
             ("path_words", self.path_words),
             ("origins", self.origins),
             ("segment0_and_escape", self.segment0_and_escape),
-            ("generations", self.generations),
             ("distribution_maps", self.distribution_maps),
-            ("light_slots", self.light_slots),
         ] {
             m.set(part, bytes);
         }
@@ -229,36 +223,57 @@ impl PathStore {
             max_photons,
             rows: (0..max_photons).map(|_| PhotonRow::with_len(paths)).collect(),
             word: vec![PathWord::default(); paths],
-            light: vec![0; paths],
+            light_end: Vec::new(),
             origin: with_origins.then(|| vec![Vec3::ZERO; paths]),
-            emit_dir: vec![Vec3::ZERO; paths],
+            emit_dir: vec![PackedDir::NONE; paths],
             emit_power: vec![Rgb::BLACK; paths],
-            escape: vec![Vec3::ZERO; paths],
-            generation: vec![0; paths],
+            escape: vec![PackedDir::NONE; paths],
             surfaces,
         }
     }
 
-    /// Bytes per path besides its photons: word, light, origin (only `with_origins`), segment-0
-    /// direction and flux, escape direction and generation.
+    /// Gives light l the next `counts[l]` paths, in light order. Paths beyond the counts' sum
+    /// (none when some light emits) belong to the last light.
+    pub fn assign(&mut self, counts: &[u32]) {
+        let mut end = 0u32;
+        self.light_end = counts
+            .iter()
+            .map(|&c| {
+                end = end.saturating_add(c);
+                end
+            })
+            .collect();
+    }
+
+    /// The light that owns `path`.
+    pub fn light_of(&self, path: usize) -> usize {
+        let l = self.light_end.partition_point(|&end| end as usize <= path);
+        l.min(self.light_end.len().saturating_sub(1))
+    }
+
+    /// The paths light `l` owns.
+    pub fn paths_of(&self, l: usize) -> std::ops::Range<usize> {
+        let start = if l == 0 { 0 } else { self.light_end.get(l - 1).map_or(self.paths, |&e| e as usize) };
+        let end = if l + 1 >= self.light_end.len() { self.paths } else { self.light_end[l] as usize };
+        start.min(self.paths)..end.max(start).min(self.paths)
+    }
+
+    /// Bytes per path besides its photons: word, origin (only `with_origins`), packed
+    /// segment-0 direction, its flux, and packed escape direction.
     pub fn bytes_per_path(with_origins: bool) -> u64 {
-        let v = std::mem::size_of::<Vec3>() as u64;
-        let origin = if with_origins { v } else { 0 };
-        (std::mem::size_of::<PathWord>() + std::mem::size_of::<u16>() + std::mem::size_of::<Rgb>() + 4) as u64
-            + 2 * v
-            + origin
+        let origin = if with_origins { std::mem::size_of::<Vec3>() } else { 0 };
+        (std::mem::size_of::<PathWord>() + 2 * std::mem::size_of::<PackedDir>() + std::mem::size_of::<Rgb>() + origin)
+            as u64
     }
 
     /// What the store's allocations hold, measured from the vectors themselves.
     pub fn memory(&self) -> StoreMemory {
         StoreMemory {
             photon_map: self.rows.iter().map(PhotonRow::heap_bytes).sum(),
-            path_words: heap_bytes(&self.word) + heap_bytes(&self.light),
+            path_words: heap_bytes(&self.word) + heap_bytes(&self.light_end),
             origins: self.origin.as_ref().map_or(0, heap_bytes),
             segment0_and_escape: heap_bytes(&self.emit_dir) + heap_bytes(&self.emit_power) + heap_bytes(&self.escape),
-            generations: heap_bytes(&self.generation),
             distribution_maps: 0,
-            light_slots: 0,
         }
     }
 }
@@ -299,6 +314,21 @@ mod tests {
             }
         }
         assert!(SurfaceIds::for_counts(&[u64::from(u32::MAX), 2]).is_none());
+    }
+
+    #[test]
+    fn each_light_owns_the_paths_it_was_assigned() {
+        // Property: light_of and paths_of agree with the counts, lights with no paths
+        // included, and paths beyond the counts belong to the last light.
+        let mut store = PathStore::new(10, 1, false, SurfaceIds::default());
+        store.assign(&[3, 0, 5, 1]);
+        let owners: Vec<usize> = (0..10).map(|p| store.light_of(p)).collect();
+        assert_eq!(owners, [0, 0, 0, 2, 2, 2, 2, 2, 3, 3]);
+        let ranges: Vec<_> = (0..4).map(|l| store.paths_of(l)).collect();
+        assert_eq!(ranges, [0..3, 3..3, 3..8, 8..10]);
+        for (l, r) in ranges.into_iter().enumerate() {
+            assert!(r.clone().all(|p| store.light_of(p) == l));
+        }
     }
 
     #[test]

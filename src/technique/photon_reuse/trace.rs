@@ -1,7 +1,7 @@
 //! Tracing photon paths with Embree: whole paths, kept segments re-intersected, and fresh tails.
 //!
-//! Every path draws its random numbers from its own stream keyed by (seed, path, generation), so
-//! results do not depend on scheduling. Paths end by Russian roulette (continue with probability
+//! Every path draws its random numbers from its own stream keyed by (seed, retrace pass, path),
+//! so results do not depend on scheduling. Paths end by Russian roulette (continue with probability
 //! max(f·cos/pdf), capped at 1), at B photons, on a light (lights absorb), or by leaving the
 //! scene. Photons are stored at every surface hit, specular ones included, so that every segment
 //! is a straight line between consecutive rows.
@@ -79,7 +79,7 @@ pub fn photon_at(store: &PathStore, path: usize, row: usize) -> Photon {
 pub fn path_origin(scene: &Scene, store: &PathStore, path: usize) -> Vec3 {
     match &store.origin {
         Some(o) => o[path],
-        None => scene.desc().lights[store.light[path] as usize].transform.translation(),
+        None => scene.desc().lights[store.light_of(path)].transform.translation(),
     }
 }
 
@@ -92,12 +92,15 @@ pub struct Tracer<'a> {
     pub seed: u64,
     pub paths_per_light: &'a [u32],
     pub frames: &'a [Option<&'a EmissionFrame>],
+    /// Which retrace pass this is: a path is traced at most once per pass, so (seed, epoch,
+    /// path) keys a fresh random stream for every new tail without a per-path counter.
+    pub epoch: u64,
 }
 
 impl Tracer<'_> {
     /// A new segment 0 for `path`: anywhere on its light, or inside `cell` of its map.
     fn emit(&self, store: &PathStore, path: usize, cell: Option<u32>, rng: &mut Rng) -> Option<(Vec3, Vec3, Rgb)> {
-        let light = store.light[path] as usize;
+        let light = store.light_of(path);
         let geometry = &self.scene.lights[light].geometry;
         let frame = self.frames.get(light).copied().flatten();
         // A point or spot light emits from where it is now; the path's stored origin is where
@@ -118,8 +121,7 @@ impl Tracer<'_> {
     /// Traces path `path` as `how` says, reading the store and returning the new tail.
     pub fn trace(&self, store: &PathStore, path: usize, how: Retrace) -> TracedTail {
         let (scene, accel) = (self.scene, self.accel);
-        let generation = store.generation[path].wrapping_add(1);
-        let mut rng = Rng::for_sample(self.seed, generation as u64, path as u64, PHOTON_STREAM);
+        let mut rng = Rng::for_sample(self.seed, self.epoch, path as u64, PHOTON_STREAM);
         let max = store.max_photons as u32;
         let mut tail =
             TracedTail { path, from: 0, photons: Vec::new(), escape: Vec3::ZERO, emission: None, cell: None, rays: 0 };
@@ -133,12 +135,12 @@ impl Tracer<'_> {
                     return tail;
                 };
                 tail.emission = Some((o, d, power));
-                let frame = self.frames.get(store.light[path] as usize).copied().flatten();
+                let frame = self.frames.get(store.light_of(path)).copied().flatten();
                 tail.cell = frame.and_then(|f| f.cell_of(o, d));
                 (o, d, power, 0)
             }
             Retrace::KeepSegment(0) => {
-                (path_origin(scene, store, path), store.emit_dir[path], store.emit_power[path], 0)
+                (path_origin(scene, store, path), store.emit_dir[path].get(), store.emit_power[path], 0)
             }
             Retrace::KeepSegment(k) if k < store.word[path].photons() => {
                 let prev = photon_at(store, path, k as usize - 1);
@@ -148,7 +150,7 @@ impl Tracer<'_> {
             Retrace::KeepSegment(k) => {
                 // The path's escape segment: its flux is what leaves photon k − 1 along it.
                 let prev = photon_at(store, path, k as usize - 1);
-                let escape = store.escape[path];
+                let escape = store.escape[path].get();
                 let material = &scene.materials[scene.objects[prev.object as usize].material as usize];
                 let w = material.sampled_weight(surface_normal(scene, &prev), -prev.incoming, escape);
                 let q = w.max_component().min(1.0);
@@ -259,14 +261,13 @@ pub fn write_back(store: &mut PathStore, tails: Vec<TracedTail>) {
             if let Some(origins) = &mut store.origin {
                 origins[i] = o;
             }
-            store.emit_dir[i] = d;
+            store.emit_dir[i] = PackedDir::new(d);
             store.emit_power[i] = p;
         }
         for (k, ph) in t.photons.iter().enumerate() {
             put_photon(store, t.from as usize + k, i, ph);
         }
         store.word[i] = store.word[i].cleared().with_photons(t.from + t.photons.len() as u32);
-        store.escape[i] = t.escape;
-        store.generation[i] = store.generation[i].wrapping_add(1);
+        store.escape[i] = PackedDir::new(t.escape);
     }
 }

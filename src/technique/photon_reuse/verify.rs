@@ -18,6 +18,7 @@
 //! checked segment by segment, and segments without their bit skip the box tree.
 use super::store::PathStore;
 use super::trace::{path_origin, Retrace};
+use crate::core::PackedDir;
 use crate::scene::edits::Aabb;
 use crate::scene::edits::SceneDelta;
 use crate::scene::{Material, Scene, SurfaceId};
@@ -172,10 +173,10 @@ fn screen_chunk(
     for (j, mask) in masks.iter_mut().enumerate() {
         let i = first + j;
         let photons = words[j].photons() as usize;
-        let escape = store.escape[i];
-        if escape == Vec3::ZERO || (photons == 0 && standing[j] == Standing::FirstVerified) {
+        if store.escape[i] == PackedDir::NONE || (photons == 0 && standing[j] == Standing::FirstVerified) {
             continue;
         }
+        let escape = store.escape[i].get();
         let start = if photons == 0 { origins[j] } else { store.rows[photons - 1].position[i] };
         let segment = Segment::new(start, escape, f32::INFINITY);
         tests += 1;
@@ -201,7 +202,7 @@ pub fn check_path(
     mask: u16,
 ) -> (Option<Retrace>, u64) {
     let photons = store.word[path].photons();
-    let escaped = store.escape[path] != Vec3::ZERO;
+    let escaped = store.escape[path] != PackedDir::NONE;
     let segments = photons + u32::from(escaped);
     let mut start = path_origin(scene, store, path);
     let mut tests = 0u64;
@@ -211,7 +212,7 @@ pub fn check_path(
             let end = store.rows[k as usize].position[path];
             (end - start, 1.0)
         } else {
-            (store.escape[path], f32::INFINITY)
+            (store.escape[path].get(), f32::INFINITY)
         };
         // A moved surface may now cross the segment (where it was, or where it is).
         let (crossed, made) = changes.crosses(mask, k, start, dir, t_max);
