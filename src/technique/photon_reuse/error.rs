@@ -163,8 +163,13 @@ pub fn check_path(
         };
         let sp = scene.surface_point(SurfaceId::Object(object), prim, h.u, h.v);
         let same_place = object == end.object && (sp.p - end.position).length() <= SAME_PLACE * dir.length();
+        // On a turned object the same place can lie on another triangle (or on its own, turned):
+        // the photon takes the triangle hit now, and stays the stored one only if that is the
+        // same triangle with the orientation it was sampled with.
+        let oriented =
+            same_place && prim == end.prim && (!changes.moved[object as usize] || changes.translated[object as usize]);
         let new = if same_place {
-            Photon { incoming: dir_n, ..end }
+            Photon { incoming: dir_n, prim, ..end }
         } else {
             Photon { position: sp.p, incoming: dir_n, object, prim, power: end.power }
         };
@@ -192,7 +197,7 @@ pub fn check_path(
         // Compare the energy reflected at the new end with the stored (lines 11–12).
         if let (Some(old_out), Some(new_out)) = (next_out(end.position), next_out(new.position)) {
             let (old_m, new_m) = (stored_material_of(end.object), material_of(new.object));
-            let unchanged = same_place && (dir_n - end.incoming).length() <= SAME_PLACE && old_m == new_m;
+            let unchanged = oriented && (dir_n - end.incoming).length() <= SAME_PLACE && old_m == new_m;
             let close = if old_m.is_specular() || new_m.is_specular() {
                 unchanged
             } else {
@@ -205,13 +210,13 @@ pub fn check_path(
             }
         }
         // Store the new end unless it is the stored one (then the stored photon stays exact).
-        let stored = if same_place && (dir_n - end.incoming).length() <= SAME_PLACE { end } else { new };
+        let stored = if oriented && (dir_n - end.incoming).length() <= SAME_PLACE { end } else { new };
         if stored != end {
             out.moved.push((k, stored));
         }
         start = stored.position;
         start_object = Some(stored.object);
-        updated = (!same_place).then_some(stored);
+        updated = (stored != end).then_some(stored);
     }
     out
 }
@@ -269,5 +274,81 @@ pub fn apply(store: &mut PathStore, path: usize, checked: Checked) -> Option<Ret
             store.escape[path] = PackedDir::new(escape);
             None
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::scene::edits::{self, Edit, SceneDelta};
+    use crate::scene::{Scene, SceneAccel, SurfaceId, Trs};
+    use crate::technique::photon_reuse::{PhotonReuse, PhotonReuseConfig, ReuseMode};
+    use crate::technique::{RenderContext, Technique};
+    use glam::{Quat, Vec3};
+
+    const SEGMENTS: u32 = 16;
+
+    /// A closed sphere of `SEGMENTS` segments about +Z, dynamic, lit by a point light at its
+    /// centre: turned by one segment, it is the same surface with every triangle renumbered.
+    fn lit_sphere() -> Scene {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+        let desc = serde_json::from_value(serde_json::json!({
+            "camera": {"position": [0, 0, 0.5], "look_at": [0, 0, -1], "vfov_deg": 60, "resolution": [4, 4]},
+            "materials": {"half": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+            "objects": [{"name": "ball", "shape": {"type": "sphere", "segments": SEGMENTS}, "material": "half",
+                         "dynamic": true}],
+            "lights": [{"name": "bulb", "emitter": {"type": "point", "intensity": [1, 1, 1]}}]
+        }))
+        .expect("scene description");
+        Scene::from_desc(desc, &root, &root).expect("valid scene")
+    }
+
+    /// Whether `p` lies on triangle [a, b, c] (in its plane, inside its edges).
+    fn on_triangle(p: Vec3, [a, b, c]: [Vec3; 3]) -> bool {
+        let n = (b - a).cross(c - a);
+        let inside = |u: Vec3, v: Vec3| (v - u).cross(p - u).dot(n) >= -1e-4 * n.length_squared();
+        (p - a).dot(n.normalize()).abs() <= 1e-4 && inside(a, b) && inside(b, c) && inside(c, a)
+    }
+
+    #[test]
+    fn a_photon_kept_in_place_on_a_turned_mesh_takes_the_triangle_now_there() {
+        // Property: after the sphere turns by one segment, error mode finds every photon on it
+        // in the same place (the surface did not change), and each stored photon's triangle is
+        // the one it lies on now, so its normal and ray offsets are right. Before the fix the
+        // photon kept its old triangle, which had turned away. Negative control: pairing each
+        // photon with the next triangle fails the same check.
+        let device = crate::embree::Device::new(2).expect("device");
+        let mut scene = lit_sphere();
+        let mut accel = SceneAccel::build(&device, &scene).expect("accel");
+        let config = PhotonReuseConfig { paths: 4000, reuse: ReuseMode::Error, refine: 0.0, ..Default::default() };
+        let mut technique = PhotonReuse::new(config, &scene).expect("technique");
+        let ctx = RenderContext { scene: &scene, accel: &accel, seed: 3, tick: 0 };
+        technique.update(&ctx, &SceneDelta::default()).expect("first tick");
+        let before = technique.store.as_ref().expect("store").rows[0].position.clone();
+
+        let turn = Quat::from_rotation_z(std::f32::consts::TAU / SEGMENTS as f32).to_array();
+        let edit = Edit::Object { name: "ball".into(), transform: Trs { rotation: turn, ..Trs::default() } };
+        let delta = edits::apply(&mut scene, vec![edit]).expect("valid edit");
+        let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
+        accel.update_instances(&scene, &moved).expect("commit");
+        let ctx = RenderContext { scene: &scene, accel: &accel, seed: 3, tick: 1 };
+        technique.update(&ctx, &delta).expect("turned tick");
+
+        let store = technique.store.as_ref().expect("store");
+        let triangles = scene.objects[0].mesh.triangles.len() as u32;
+        let (mut kept, mut wrong, mut wrong_next, mut photons) = (0, 0, 0, 0);
+        for path in 0..store.paths {
+            for k in 0..store.word[path].photons() as usize {
+                let (object, prim) = store.surfaces.object_and_prim(store.rows[k].surface[path]);
+                let p = store.rows[k].position[path];
+                photons += 1;
+                kept += usize::from(k == 0 && p == before[path]);
+                wrong += usize::from(!on_triangle(p, scene.triangle(SurfaceId::Object(object), prim)));
+                let next = (prim + 1) % triangles;
+                wrong_next += usize::from(!on_triangle(p, scene.triangle(SurfaceId::Object(object), next)));
+            }
+        }
+        assert!(kept > store.paths / 2, "only {kept} first photons stayed in place: the test is weak");
+        assert_eq!(wrong, 0, "{wrong} of {photons} photons lie off their stored triangle");
+        assert!(wrong_next > photons / 2, "the neighbouring triangle passed for {wrong_next} of {photons}");
     }
 }
