@@ -336,12 +336,12 @@ mod tests {
         let store = technique.store.as_ref().expect("store");
         let triangles = scene.objects[0].mesh.triangles.len() as u32;
         let (mut kept, mut wrong, mut wrong_next, mut photons) = (0, 0, 0, 0);
-        for path in 0..store.paths {
+        for (path, first_before) in before.iter().enumerate() {
             for k in 0..store.word[path].photons() as usize {
                 let (object, prim) = store.surfaces.object_and_prim(store.rows[k].surface[path]);
                 let p = store.rows[k].position[path];
                 photons += 1;
-                kept += usize::from(k == 0 && p == before[path]);
+                kept += usize::from(k == 0 && p == *first_before);
                 wrong += usize::from(!on_triangle(p, scene.triangle(SurfaceId::Object(object), prim)));
                 let next = (prim + 1) % triangles;
                 wrong_next += usize::from(!on_triangle(p, scene.triangle(SurfaceId::Object(object), next)));
