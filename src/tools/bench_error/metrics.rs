@@ -1,6 +1,8 @@
 //! Image error against a reference, all computed on linear radiance unless noted:
 //! - relMSE = mean over pixels and channels of (x − r)² / (r² + ε), ε = 0.01;
 //! - RMSE = √(mean (x − r)²);
+//! - mean bias: the image mean's relative gap to the reference's, Σx / Σr − 1, for the channel
+//!   where it is largest in magnitude (signed: negative is too dark);
 //! - PSNR (dB) of the tonemapped images (the 8-bit sRGB the service serves, clamped at 1);
 //! - LDR-FLIP (Andersson et al. 2020, through the `nv-flip` crate) of those 8-bit images,
 //!   at 67 pixels per degree;
@@ -22,26 +24,39 @@ pub struct ImageError {
     pub psnr_db: f64,
     pub flip_ldr: f64,
     pub flip_hdr: f64,
+    pub mean_bias: f64,
 }
 
 /// The error of `test` against `reference` (same size), and the HDR-FLIP error map.
 pub fn compare(test: &LinearImage, reference: &LinearImage) -> (ImageError, FlipImageFloat) {
     let (mut rel, mut sq) = (0.0f64, 0.0f64);
+    let (mut sum_test, mut sum_ref) = ([0.0f64; 3], [0.0f64; 3]);
     for (x, r) in test.pixels.iter().zip(&reference.pixels) {
-        for (a, b) in x.to_array().iter().zip(r.to_array()) {
+        for (c, (a, b)) in x.to_array().iter().zip(r.to_array()).enumerate() {
             let d = (*a as f64) - b as f64;
             rel += d * d / ((b as f64) * (b as f64) + REL_MSE_EPSILON);
             sq += d * d;
+            sum_test[c] += *a as f64;
+            sum_ref[c] += b as f64;
         }
     }
+    let mean_bias = (0..3)
+        .map(|c| if sum_ref[c] > 0.0 { sum_test[c] / sum_ref[c] - 1.0 } else { 0.0 })
+        .fold(0.0f64, |worst, g| if g.abs() > worst.abs() { g } else { worst });
     let n = (test.pixels.len() * 3).max(1) as f64;
     let (t8, r8) = (test.to_srgb8(0.0), reference.to_srgb8(0.0));
     let mse8: f64 = t8.iter().zip(&r8).map(|(a, b)| ((*a as f64 - *b as f64) / 255.0).powi(2)).sum::<f64>() / n;
     let psnr_db = if mse8 > 0.0 { 10.0 * (1.0 / mse8).log10() } else { f64::INFINITY };
     let ldr = flip_map(test, reference, 0.0);
     let hdr = hdr_flip_map(test, reference);
-    let error =
-        ImageError { rel_mse: rel / n, rmse: (sq / n).sqrt(), psnr_db, flip_ldr: mean(&ldr), flip_hdr: mean(&hdr) };
+    let error = ImageError {
+        rel_mse: rel / n,
+        rmse: (sq / n).sqrt(),
+        psnr_db,
+        flip_ldr: mean(&ldr),
+        flip_hdr: mean(&hdr),
+        mean_bias,
+    };
     (error, hdr)
 }
 
@@ -101,7 +116,11 @@ mod tests {
         let (e, _) = compare(&image(0.6), &image(0.5));
         assert!((e.rmse - 0.1).abs() < 1e-6);
         assert!((e.rel_mse - 0.01 / (0.25 + REL_MSE_EPSILON)).abs() < 1e-6);
+        assert!((e.mean_bias - 0.2).abs() < 1e-6, "0.6 against 0.5 is 20% bright: {e:?}");
         assert!(e.flip_ldr > 0.0, "{e:?}");
+        // The mean bias is signed and takes the worst channel: only blue is 10% dark here.
+        let dim_blue = LinearImage { pixels: vec![Rgb::new(0.5, 0.5, 0.45); 256], ..image(0.5) };
+        assert!((compare(&dim_blue, &image(0.5)).0.mean_bias + 0.1).abs() < 1e-6);
         // HDR-FLIP looks through the exposures of the reference: a 30% change shows at each.
         let mut reference = image(0.25);
         reference.pixels[..128].iter_mut().for_each(|p| *p = Rgb::splat(4.0));

@@ -88,6 +88,7 @@ struct CsvRow<'a> {
     psnr_db: Option<f64>,
     flip_ldr: Option<f64>,
     flip_hdr: Option<f64>,
+    mean_bias: Option<f64>,
 }
 
 pub fn write_all(
@@ -115,6 +116,7 @@ pub fn write_all(
             psnr_db: f.error.map(|e| e.psnr_db),
             flip_ldr: f.error.map(|e| e.flip_ldr),
             flip_hdr: f.error.map(|e| e.flip_hdr),
+            mean_bias: f.error.map(|e| e.mean_bias),
         })?;
     }
     csv.flush()?;
