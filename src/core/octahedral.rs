@@ -19,7 +19,7 @@ impl PackedDir {
     /// The code of the zero vector ("no direction").
     pub const NONE: PackedDir = PackedDir(u32::MAX);
     /// Bound on the angle between a unit vector and its decoded packing (radians).
-    pub const MAX_ANGLE_ERROR: f32 = 5e-5;
+    pub const MAX_ANGLE_ERROR: f32 = 7e-5;
 
     /// Packs `d` (normalized here); the zero vector, or one that is not finite, packs to NONE.
     pub fn new(d: Vec3) -> PackedDir {
@@ -29,13 +29,12 @@ impl PackedDir {
         }
         let p = Vec2::new(d.x, d.y) / (d.x.abs() + d.y.abs() + d.z.abs());
         let p = if d.z < 0.0 { fold(p) } else { p };
-        // Of the four codes around p, the one that decodes nearest to d (Cigolle et al.'s
-        // "precise" variant: rounding each axis alone measured 1.5× worse).
-        let low = |x: f32| (((x.clamp(-1.0, 1.0) + 1.0) * 0.5 * STEPS).floor() as u32).min(STEPS as u32 - 1);
-        let (x, y) = (low(p.x), low(p.y));
-        let candidates = [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)].map(|(a, b)| PackedDir(a << 16 | b));
-        let miss = |c: &PackedDir| (c.get() - d).length_squared();
-        candidates.into_iter().min_by(|a, b| miss(a).total_cmp(&miss(b))).unwrap_or(PackedDir::NONE)
+        // Rounded to the nearest level per axis; `as` truncates, and the scaled values are
+        // never negative. Cigolle et al.'s "precise" variant (the best of the four codes
+        // around p) measured 1.5× more accurate and 2.5× slower to encode; tracing encodes
+        // every photon, and this bound is enough for the store.
+        let level = |x: f32| (((x.clamp(-1.0, 1.0) + 1.0) * 0.5 * STEPS + 0.5) as u32).min(STEPS as u32);
+        PackedDir(level(p.x) << 16 | level(p.y))
     }
 
     /// The unit direction, or the zero vector for NONE.
@@ -74,7 +73,7 @@ mod tests {
     #[test]
     fn round_trips_stay_within_the_stated_angle() {
         // Property: every unit vector (the axes, the poles and 200 000 uniform ones) decodes
-        // within MAX_ANGLE_ERROR. Negative control: 8 bits per axis (dropping the low byte of
+        // within MAX_ANGLE_ERROR (measured: 6.4e-5). Negative control: 8 bits per axis (dropping the low byte of
         // each coordinate) must exceed the bound, so the test can tell a coarse packing.
         let worst = worst_error(|d| PackedDir::new(d).get());
         assert!(worst <= PackedDir::MAX_ANGLE_ERROR, "worst angle {worst} rad");
