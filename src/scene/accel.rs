@@ -119,10 +119,17 @@ impl SceneAccel {
     /// meets them exactly as it would there. Queries against it cost a few instances, not the
     /// scene. Fails if a surface is not dynamic.
     pub fn subset(&self, scene: &Scene, surfaces: &[SurfaceId]) -> Result<CommittedScene, EmbreeError> {
+        let placed: Vec<_> = surfaces.iter().map(|&id| (id, current_transform(scene, id))).collect();
+        self.subset_at(&placed)
+    }
+
+    /// Like [`SceneAccel::subset`], with each dynamic surface under the given transform (where
+    /// it was before a move, say).
+    pub fn subset_at(&self, placed: &[(SurfaceId, Affine3A)]) -> Result<CommittedScene, EmbreeError> {
         let mut subset = EmbreeScene::new(self.top.device(), SceneQuality::Dynamic)?;
-        for id in surfaces {
+        for (id, transform) in placed {
             let (_, blas) = self.instance_of.get(id).ok_or(EmbreeError::UnknownGeometry(u32::MAX))?;
-            subset.attach_instance(blas.clone(), current_transform(scene, *id))?;
+            subset.attach_instance(blas.clone(), *transform)?;
         }
         subset.commit()
     }

@@ -109,8 +109,10 @@ pub fn check_path(
                 false => escape,
             })
         };
-        let (crossed, tests) = changes.crosses(mask, k, start, dir, t_max);
-        out.tests += tests;
+        let crossing = changes.crosses(mask, k, start, dir, t_max);
+        let crossed = crossing.crossed;
+        out.tests += crossing.tests;
+        out.rays += crossing.rays;
         let end_moved = stored_end.is_some_and(|(_, o)| changes.moved[o as usize]);
         let start_on_moved = start_object.is_some_and(|o| changes.moved[o as usize]);
         if !crossed && !end_moved && updated.is_none() && !start_on_moved {

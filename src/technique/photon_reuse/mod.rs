@@ -18,9 +18,10 @@
 //! 3. **Dynamic occlusions** (§3.2–3.3): a bounce-row screen (`verify.rs`) passes on only the
 //!    paths with a segment near a moved box or ending on a moved or edited object; those are
 //!    tested segment by segment from the light against the old and new world bounds of every
-//!    moved surface (a small BVH over the boxes) and against edited materials. `naive`: the first segment that may be
-//!    crossed, or that ends on a moved object, is re-intersected and everything after it is
-//!    traced afresh. `error` (`error.rs`, Algorithm 1): crossed segments are re-traced and the
+//!    moved surface (a small BVH over the boxes) and against edited materials. `naive`: a
+//!    segment in a box is tested exactly against the moved surfaces where they were and where
+//!    they are (two small Embree scenes); the first segment so crossed, or that ends on a moved
+//!    object, is re-intersected and everything after it is traced afresh. `error` (`error.rs`, Algorithm 1): crossed segments are re-traced and the
 //!    path is kept while the energy reflected at each new vertex stays within T of the stored.
 //! 4. **Prune and fill** (`lights.rs`, eq. 1) for lights that moved or whose map has not yet
 //!    settled, then trace fills and retraces in parallel.
@@ -63,7 +64,10 @@
 //! scene is still, refinement makes the film's average consistent at fixed N: the kernel bias
 //! of pass k falls as r_k² ∝ k^(α−1) = k^(−1/3), and the photon noise of the average as
 //! k^(−α) (the passes' maps share all but a `refine` share of their paths, which scales the
-//! variance by about 1/`refine`, not the rate), so the MSE falls as O(k^(−2/3)). Russian
+//! variance by about 1/`refine`, not the rate), so the MSE falls as O(k^(−2/3)). Measured on
+//! the Cornell box at the defaults (`relume bench error`, 1M paths, 256²): 64 still ticks bring
+//! the relMSE to 1/16 of the first tick's (1/19 with `refine` 0.25; α = 0.5 and 0.8 do no
+//! better): the fresh paths per still tick, not the radius schedule, set the pace. Russian
 //! roulette and B truncate paths: B = 7 loses the energy beyond seven bounces. `naive` reuse
 //! adds no bias: a kept prefix is a valid sample, a re-intersected segment keeps a direction
 //! sampled independently of what it hits, and every retraced tail is a fresh sample. `error`
@@ -430,6 +434,13 @@ impl PhotonReuse {
         let scene = ctx.scene;
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
         let changes = Changes::new(scene, delta, BOX_SLACK * diagonal);
+        // Naive mode retraces every crossed segment, so an exact crossing test saves retraces;
+        // error mode re-intersects crossed segments anyway, and on the benchmarks the test cost
+        // it as much as it saved (`docs/benchmarks.md`).
+        let changes = match self.config.reuse {
+            ReuseMode::Naive => changes.with_geometry(ctx.accel, delta),
+            _ => changes,
+        };
         let t = Instant::now();
         let (screened, screen_tests) = verify::screen(scene, store, &changes, standing);
         self.pending.screen_ms = ms(t);
@@ -437,23 +448,24 @@ impl PhotonReuse {
         self.pending.verify_box_tests += screen_tests;
         let todo = || screened.par_iter().map(|&(i, mask)| (i as usize, mask));
         if self.config.reuse == ReuseMode::Naive {
-            let (tests, failed) = todo()
+            let (tests, rays, failed) = todo()
                 .fold(
-                    || (0u64, Vec::new()),
-                    |(tests, mut failed), (i, mask)| {
-                        let (retrace, made) = verify::check_path(scene, store, i, &changes, mask);
+                    || (0u64, 0u64, Vec::new()),
+                    |(tests, rays, mut failed), (i, mask)| {
+                        let (retrace, t, r) = verify::check_path(scene, store, i, &changes, mask);
                         failed.extend(retrace.map(|r| (i, r)));
-                        (tests + made, failed)
+                        (tests + t, rays + r, failed)
                     },
                 )
                 .reduce(
-                    || (0, Vec::new()),
-                    |(tests, mut failed), (more, rest)| {
+                    || (0, 0, Vec::new()),
+                    |(tests, rays, mut failed), (more_tests, more_rays, rest)| {
                         failed.extend(rest);
-                        (tests + more, failed)
+                        (tests + more_tests, rays + more_rays, failed)
                     },
                 );
             self.pending.verify_box_tests += tests;
+            self.pending.verify_rays += rays;
             for (i, r) in failed {
                 plan[i] = Some(r);
             }

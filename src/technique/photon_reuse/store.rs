@@ -6,6 +6,12 @@
 //! photon k. A path whose last segment left the scene keeps that segment's direction
 //! (`escape`), so an object moving into it is still noticed. Units: positions in meters, power
 //! in watts (flux per photon), directions unit length.
+//!
+//! Layout (the paper's Table 1 budget): a photon is 32 bytes (position 12, octahedral incoming
+//! direction 4, surface id 4, flux 12); a path's reuse data is 24 bytes (path word 4, octahedral
+//! segment-0 and escape directions 4 + 4, segment-0 flux 12), plus a 12-byte origin only when
+//! some light has a shape. Each light's paths are contiguous, so no path stores its light. Stored
+//! directions are within [`PackedDir::MAX_ANGLE_ERROR`] of the traced ones.
 use crate::core::{PackedDir, Rgb};
 use crate::scene::Scene;
 use glam::Vec3;
@@ -45,6 +51,15 @@ impl PhotonRow {
     fn heap_bytes(&self) -> u64 {
         heap_bytes(&self.position) + heap_bytes(&self.incoming) + heap_bytes(&self.surface) + heap_bytes(&self.power)
     }
+}
+
+/// A photon as a row keeps it (packed where tracing runs in parallel, copied in afterwards).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StoredPhoton {
+    pub position: Vec3,
+    pub incoming: PackedDir,
+    pub surface: u32,
+    pub power: Rgb,
 }
 
 /// One 32-bit id per (object, triangle), decoded in O(1). Ids come in blocks of 2^`shift`;
@@ -230,6 +245,15 @@ impl PathStore {
             escape: vec![PackedDir::NONE; paths],
             surfaces,
         }
+    }
+
+    /// Writes photon `p` into row `row` of path `path`.
+    pub fn put(&mut self, row: usize, path: usize, p: StoredPhoton) {
+        let r = &mut self.rows[row];
+        r.position[path] = p.position;
+        r.incoming[path] = p.incoming;
+        r.surface[path] = p.surface;
+        r.power[path] = p.power;
     }
 
     /// Gives light l the next `counts[l]` paths, in light order. Paths beyond the counts' sum

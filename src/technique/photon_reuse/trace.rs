@@ -6,7 +6,7 @@
 //! scene. Photons are stored at every surface hit, specular ones included, so that every segment
 //! is a straight line between consecutive rows.
 use super::distribution::EmissionFrame;
-use super::store::PathStore;
+use super::store::{PathStore, StoredPhoton};
 use crate::core::{offset_ray_origin, PackedDir, Rgb, Rng};
 use crate::embree::Ray;
 use crate::scene::{Scene, SceneAccel, SurfaceId};
@@ -60,10 +60,10 @@ pub struct TracedTail {
     pub path: usize,
     /// First row written.
     pub from: u32,
-    pub photons: Vec<Photon>,
-    pub escape: Vec3,
+    pub photons: Vec<StoredPhoton>,
+    pub escape: PackedDir,
     /// New segment 0 (origin, direction, flux) when re-emitted.
-    pub emission: Option<(Vec3, Vec3, Rgb)>,
+    pub emission: Option<(Vec3, PackedDir, Rgb)>,
     /// The distribution-map cell of a re-emitted path whose light has a map.
     pub cell: Option<u32>,
     pub rays: u64,
@@ -123,18 +123,25 @@ impl Tracer<'_> {
         let (scene, accel) = (self.scene, self.accel);
         let mut rng = Rng::for_sample(self.seed, self.epoch, path as u64, PHOTON_STREAM);
         let max = store.max_photons as u32;
-        let mut tail =
-            TracedTail { path, from: 0, photons: Vec::new(), escape: Vec3::ZERO, emission: None, cell: None, rays: 0 };
+        let mut tail = TracedTail {
+            path,
+            from: 0,
+            photons: Vec::new(),
+            escape: PackedDir::NONE,
+            emission: None,
+            cell: None,
+            rays: 0,
+        };
 
         // Where the traced segment starts, where it goes, with what flux.
         let (mut origin, mut dir, mut power, from) = match how {
             Retrace::Emit | Retrace::Fill(_) => {
                 let cell = if let Retrace::Fill(c) = how { Some(c) } else { None };
                 let Some((o, d, power)) = self.emit(store, path, cell, &mut rng) else {
-                    tail.emission = Some((path_origin(scene, store, path), Vec3::Z, Rgb::BLACK));
+                    tail.emission = Some((path_origin(scene, store, path), PackedDir::new(Vec3::Z), Rgb::BLACK));
                     return tail;
                 };
-                tail.emission = Some((o, d, power));
+                tail.emission = Some((o, PackedDir::new(d), power));
                 let frame = self.frames.get(store.light_of(path)).copied().flatten();
                 tail.cell = frame.and_then(|f| f.cell_of(o, d));
                 (o, d, power, 0)
@@ -179,18 +186,18 @@ impl Tracer<'_> {
         while row < max {
             tail.rays += 1;
             let Some(hit) = accel.scene().intersect1(&Ray::new(origin, dir)) else {
-                tail.escape = dir;
+                tail.escape = PackedDir::new(dir);
                 break;
             };
             let Some((SurfaceId::Object(object), prim)) = accel.resolve(&hit) else {
                 // A light absorbs the path; its last segment is kept like an escape, so an
                 // object moving into it is noticed.
-                tail.escape = dir;
+                tail.escape = PackedDir::new(dir);
                 break;
             };
             let sp = scene.surface_point(SurfaceId::Object(object), prim, hit.u, hit.v);
             let photon = Photon { position: sp.p, incoming: dir, object, prim, power };
-            tail.photons.push(photon);
+            tail.photons.push(pack(store, &photon));
             row += 1;
             if row >= max {
                 break;
@@ -238,14 +245,15 @@ fn scatter(scene: &Scene, p: &Photon, rng: &mut Rng, roulette: bool) -> Option<(
     Some((offset_towards(p.position, n, bs.wi), bs.wi, p.power * bs.weight / q))
 }
 
+/// Photon `p` packed as the store keeps it.
+fn pack(store: &PathStore, p: &Photon) -> StoredPhoton {
+    let surface = store.surfaces.id(p.object, p.prim);
+    StoredPhoton { position: p.position, incoming: PackedDir::new(p.incoming), surface, power: p.power }
+}
+
 /// Writes photon `p` into row `row` of path `path`.
 pub fn put_photon(store: &mut PathStore, row: usize, path: usize, p: &Photon) {
-    let id = store.surfaces.id(p.object, p.prim);
-    let r = &mut store.rows[row];
-    r.position[path] = p.position;
-    r.incoming[path] = PackedDir::new(p.incoming);
-    r.surface[path] = id;
-    r.power[path] = p.power;
+    store.put(row, path, pack(store, p));
 }
 
 /// Writes traced tails back into the store.
@@ -261,13 +269,13 @@ pub fn write_back(store: &mut PathStore, tails: Vec<TracedTail>) {
             if let Some(origins) = &mut store.origin {
                 origins[i] = o;
             }
-            store.emit_dir[i] = PackedDir::new(d);
+            store.emit_dir[i] = d;
             store.emit_power[i] = p;
         }
-        for (k, ph) in t.photons.iter().enumerate() {
-            put_photon(store, t.from as usize + k, i, ph);
+        for (k, &ph) in t.photons.iter().enumerate() {
+            store.put(t.from as usize + k, i, ph);
         }
         store.word[i] = store.word[i].cleared().with_photons(t.from + t.photons.len() as u32);
-        store.escape[i] = PackedDir::new(t.escape);
+        store.escape[i] = t.escape;
     }
 }
