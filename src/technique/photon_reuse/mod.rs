@@ -446,24 +446,11 @@ impl PhotonReuse {
         self.pending.screen_ms = ms(t);
         self.pending.screened = screened.len() as u64;
         self.pending.verify_box_tests += screen_tests;
-        let todo = || screened.par_iter().map(|&(i, mask)| (i as usize, mask));
         if self.config.reuse == ReuseMode::Naive {
-            let (tests, rays, failed) = todo()
-                .fold(
-                    || (0u64, 0u64, Vec::new()),
-                    |(tests, rays, mut failed), (i, mask)| {
-                        let (retrace, t, r) = verify::check_path(scene, store, i, &changes, mask);
-                        failed.extend(retrace.map(|r| (i, r)));
-                        (tests + t, rays + r, failed)
-                    },
-                )
-                .reduce(
-                    || (0, 0, Vec::new()),
-                    |(tests, rays, mut failed), (more_tests, more_rays, rest)| {
-                        failed.extend(rest);
-                        (tests + more_tests, rays + more_rays, failed)
-                    },
-                );
+            let (tests, rays, failed) = check_all(&screened, |i, mask| {
+                let (retrace, tests, rays) = verify::check_path(scene, store, i, &changes, mask);
+                (tests, rays, retrace)
+            });
             self.pending.verify_box_tests += tests;
             self.pending.verify_rays += rays;
             for (i, r) in failed {
@@ -472,26 +459,11 @@ impl PhotonReuse {
             return false;
         }
         let threshold = self.config.threshold;
-        let (tests, rays, decided) = todo()
-            .fold(
-                || (0u64, 0u64, Vec::new()),
-                |(tests, rays, mut decided), (i, mask)| {
-                    let c = error::check_path(scene, ctx.accel, store, i, &changes, threshold, mask);
-                    let (t, r) = (c.tests, c.rays);
-                    if c.outcome != error::Outcome::Valid || !c.moved.is_empty() {
-                        decided.push((i, c));
-                    }
-                    (tests + t, rays + r, decided)
-                },
-            )
-            .reduce(
-                || (0, 0, Vec::new()),
-                // Moved, not cloned: each `Checked` owns its moved photons.
-                |(tests, rays, mut decided), (more_tests, more_rays, rest)| {
-                    decided.extend(rest);
-                    (tests + more_tests, rays + more_rays, decided)
-                },
-            );
+        let (tests, rays, decided) = check_all(&screened, |i, mask| {
+            let c = error::check_path(scene, ctx.accel, store, i, &changes, threshold, mask);
+            let decided = c.outcome != error::Outcome::Valid || !c.moved.is_empty();
+            (c.tests, c.rays, decided.then_some(c))
+        });
         self.pending.verify_box_tests += tests;
         self.pending.verify_rays += rays;
         let moved_photons = !decided.is_empty();
@@ -501,6 +473,31 @@ impl PhotonReuse {
         }
         moved_photons
     }
+}
+
+/// Runs `check` on every screened (path, mask) in parallel: the sums of its box tests and rays,
+/// and the results it returns, with their paths. Results are moved, never cloned.
+fn check_all<T: Send>(
+    screened: &[(u32, u16)],
+    check: impl Fn(usize, u16) -> (u64, u64, Option<T>) + Sync,
+) -> (u64, u64, Vec<(usize, T)>) {
+    screened
+        .par_iter()
+        .fold(
+            || (0u64, 0u64, Vec::new()),
+            |(tests, rays, mut out), &(i, mask)| {
+                let (t, r, result) = check(i as usize, mask);
+                out.extend(result.map(|x| (i as usize, x)));
+                (tests + t, rays + r, out)
+            },
+        )
+        .reduce(
+            || (0, 0, Vec::new()),
+            |(tests, rays, mut out), (more_tests, more_rays, rest)| {
+                out.extend(rest);
+                (tests + more_tests, rays + more_rays, out)
+            },
+        )
 }
 
 impl Technique for PhotonReuse {
