@@ -181,6 +181,16 @@ fn bad_configurations_are_rejected_naming_the_field() {
     }
     let parsed: Result<TechniqueConfig, _> = serde_json::from_str(r#"{"id": "photon_reuse", "reuse": "sometimes"}"#);
     assert!(parsed.is_err());
+    // A field of the wrong type is named, though the technique is chosen by its `id` (serde's
+    // tagged enums lose the field's name).
+    for (json, field) in [
+        (r#"{"id": "photon_reuse", "paths": -3}"#, "paths"),
+        (r#"{"id": "photon_reuse", "distribution_map": {"position": [8, "x"]}}"#, "distribution_map.position[1]"),
+        (r#"{"id": "path", "spp": 1.5}"#, "spp"),
+    ] {
+        let error = serde_json::from_str::<TechniqueConfig>(json).expect_err(json).to_string();
+        assert!(error.starts_with(&format!("{field}: ")), "{json}: {error}");
+    }
 }
 
 #[test]

@@ -106,7 +106,7 @@ impl TechniqueStats {
 }
 
 /// Which technique to run, with its parameters. JSON: `{"id": "path", "spp": 4, ...}`.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(tag = "id", rename_all = "snake_case")]
 pub enum TechniqueConfig {
     Path(path::PathConfig),
@@ -114,6 +114,40 @@ pub enum TechniqueConfig {
     Bdpt(bdpt::BdptConfig),
     InstantCache(instant_cache::InstantCacheConfig),
     ParticleGi(particle_gi::ParticleGiConfig),
+}
+
+impl<'de> Deserialize<'de> for TechniqueConfig {
+    /// As `#[serde(tag = "id")]` would, except that an error in a technique's fields names the
+    /// field (`paths: invalid value ...`): serde's tagged enums buffer the fields and lose the
+    /// path to the one at fault.
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let mut fields = serde_json::Map::<String, serde_json::Value>::deserialize(deserializer)?;
+        let id = match fields.remove("id") {
+            Some(serde_json::Value::String(id)) => id,
+            Some(other) => return Err(D::Error::custom(format!("id: {other} is not a technique id"))),
+            None => return Err(D::Error::missing_field("id")),
+        };
+        fn fields_of<T: serde::de::DeserializeOwned, E: serde::de::Error>(
+            fields: serde_json::Map<String, serde_json::Value>,
+        ) -> Result<T, E> {
+            serde_path_to_error::deserialize(serde_json::Value::Object(fields)).map_err(|e| {
+                let path = e.path().to_string();
+                match path.as_str() {
+                    "" | "." => E::custom(e.into_inner()),
+                    _ => E::custom(format!("{path}: {}", e.into_inner())),
+                }
+            })
+        }
+        match id.as_str() {
+            "path" => fields_of(fields).map(TechniqueConfig::Path),
+            "photon_reuse" => fields_of(fields).map(TechniqueConfig::PhotonReuse),
+            "bdpt" => fields_of(fields).map(TechniqueConfig::Bdpt),
+            "instant_cache" => fields_of(fields).map(TechniqueConfig::InstantCache),
+            "particle_gi" => fields_of(fields).map(TechniqueConfig::ParticleGi),
+            other => Err(D::Error::unknown_variant(other, TECHNIQUE_IDS)),
+        }
+    }
 }
 
 impl TechniqueConfig {
