@@ -288,3 +288,25 @@ async fn frames_are_encoded_once_per_tick_and_format_and_revalidate_by_etag() {
     assert!(frames.iter().all(|f| f[..] == http_tick1[..]), "subscribers got different bytes");
     assert_eq!(encoded(), before_tick + 1, "each subscriber encoded its own copy");
 }
+
+#[tokio::test]
+async fn every_response_names_its_node_and_session_ids_start_with_it() {
+    // Property: a proxy can route by the session id's node prefix and check which node
+    // answered: ids are `NODE.sID`, and every response (a success, a 404, a refused body, the
+    // health check) carries `X-Relume-Node`. The test server's node is "test-node".
+    let s = TestServer::start(None, Limits::default()).await;
+    let http = &s.http;
+    let node = |r: &reqwest::Response| r.headers().get("x-relume-node").map(|v| v.to_str().unwrap_or("").to_string());
+    let id = s.session(small("cornell-box")).await;
+    assert!(id.starts_with("test-node.s"), "{id}");
+    let (prefix, rest) = id.split_once('.').expect("a node prefix");
+    assert!(prefix == "test-node" && !rest.contains('.'), "{id}");
+    for r in [
+        http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap(),
+        http.get(s.url("/v1/sessions/nobody.s1-0")).send().await.unwrap(),
+        http.post(s.url("/v1/sessions")).body("{").header("content-type", "application/json").send().await.unwrap(),
+        http.get(s.url("/healthz")).send().await.unwrap(),
+    ] {
+        assert_eq!(node(&r).as_deref(), Some("test-node"), "{} {:?}", r.status(), r.url().path());
+    }
+}

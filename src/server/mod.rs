@@ -20,7 +20,7 @@ pub mod worker;
 pub mod ws;
 
 pub use error::ApiError;
-pub use state::{Access, AppState, Limits, ServerConfig};
+pub use state::{valid_node, Access, AppState, Limits, ServerConfig};
 
 use axum::extract::{DefaultBodyLimit, Request, State};
 use axum::http::StatusCode;
@@ -115,6 +115,18 @@ async fn expire_idle(state: Arc<AppState>) {
 }
 
 /// Counts every 4xx/5xx answer by its `error` code for `/metrics`.
+/// Names this node on every response (`X-Relume-Node`), errors and CORS answers included.
+async fn name_node(State(s): State<Shared>, req: Request, next: Next) -> Response {
+    let mut resp = next.run(req).await;
+    if let Ok(node) = axum::http::HeaderValue::from_str(&s.config.node) {
+        resp.headers_mut().insert(NODE_HEADER, node);
+    }
+    resp
+}
+
+/// The response header naming the node that answered.
+pub const NODE_HEADER: &str = "x-relume-node";
+
 async fn count_rejections(State(s): State<Shared>, req: Request, next: Next) -> Response {
     let resp = next.run(req).await;
     let status = resp.status();
@@ -201,7 +213,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         Some(c) => app.layer(c),
         None => app,
     };
-    app.with_state(state)
+    app.layer(middleware::from_fn_with_state(state.clone(), name_node)).with_state(state)
 }
 
 /// CORS for the configured origins only; `None` (no CORS headers at all) when there are none.

@@ -117,6 +117,19 @@ pub struct ServerConfig {
     pub isa: Option<crate::embree::Isa>,
     pub limits: Limits,
     pub access: Access,
+    /// This process's node name ([`valid_node`]): every session id it makes starts with
+    /// `NODE.`, and every response says it in `X-Relume-Node`, so a proxy can route a session's
+    /// requests to the process that owns it.
+    pub node: String,
+}
+
+/// A node name: a DNS label (letters, digits and `-`, 1 to 63 characters, no leading or
+/// trailing `-`), so it can be a pod's name and a part of a URL path.
+pub fn valid_node(name: &str) -> bool {
+    (1..=63).contains(&name.len())
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-')
+        && !name.starts_with('-')
+        && !name.ends_with('-')
 }
 
 /// Who may reach the server from a browser.
@@ -418,7 +431,7 @@ impl AppState {
             .duration_since(std::time::UNIX_EPOCH)
             .map(|d| d.as_nanos() as u64)
             .unwrap_or(0);
-        let id = format!("s{n}-{:08x}", crate::core::rng::mix64(salt ^ n) as u32);
+        let id = format!("{}.s{n}-{:08x}", self.config.node, crate::core::rng::mix64(salt ^ n) as u32);
         let context = WorkerContext {
             pool: self.pool.clone(),
             turns: self.turns.clone(),
@@ -565,8 +578,19 @@ mod tests {
             isa: None,
             limits,
             access: Access::default(),
+            node: "unit".into(),
         };
         AppState::new(config).expect("server state")
+    }
+
+    #[test]
+    fn node_names_are_dns_labels() {
+        for good in ["a", "relume-0", "node7", &"n".repeat(63)] {
+            assert!(valid_node(good), "{good}");
+        }
+        for bad in ["", "-a", "a-", "a.b", "a_b", "a b", "ä", &"n".repeat(64)] {
+            assert!(!valid_node(bad), "{bad}");
+        }
     }
 
     fn photon_session() -> CreateSession {

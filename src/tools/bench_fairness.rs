@@ -211,6 +211,7 @@ pub fn run(args: FairnessArgs) -> Result<()> {
             isa: None,
             limits: Limits::default(),
             access: Default::default(),
+            node: "fairness".into(),
         };
         let state = Arc::new(AppState::new(config)?);
         let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;

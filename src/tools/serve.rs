@@ -1,6 +1,6 @@
 //! `relume serve`: runs the HTTP/WebSocket service until SIGINT or SIGTERM.
 use super::UsageError;
-use crate::server::{self, Access, AppState, Limits, ServerConfig};
+use crate::server::{self, valid_node, Access, AppState, Limits, ServerConfig};
 use anyhow::{Context, Result};
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -47,6 +47,11 @@ pub struct ServeArgs {
     /// responses through CORS (repeat for more). CORS is off without it.
     #[arg(long = "allow-origin")]
     pub allow_origins: Vec<String>,
+    /// Node name: every session id this process makes is `NODE.sID`, and every response carries
+    /// `X-Relume-Node: NODE`, so a proxy can route a session to its owner (default: the
+    /// hostname).
+    #[arg(long)]
+    pub node: Option<String>,
     /// Rendering threads shared by all sessions (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -81,6 +86,13 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
     if args.session_memory == 0 || args.server_memory == Some(0) {
         return Err(UsageError("--session-memory and --server-memory must be at least 1 MiB".into()).into());
     }
+    let node = args.node.clone().unwrap_or_else(hostname);
+    if !valid_node(&node) {
+        return Err(UsageError(format!(
+            "--node {node:?}: a node name is 1 to 63 letters, digits and '-', not starting or ending with '-'"
+        ))
+        .into());
+    }
     let threads = super::threads_or_all_cores(args.threads);
     let server_memory = args.server_memory.map_or_else(three_quarters_of_ram, |mib| mib << 20);
     Ok(ServerConfig {
@@ -99,7 +111,18 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
             ..Limits::default()
         },
         access: Access { hosts: args.allow_hosts.clone(), origins: args.allow_origins.clone() },
+        node,
     })
+}
+
+/// The machine's host name (the kernel's, as `hostname` prints it), or `relume` where it is
+/// unknown or is not a valid node name.
+fn hostname() -> String {
+    std::fs::read_to_string("/proc/sys/kernel/hostname")
+        .map(|h| h.trim().to_string())
+        .ok()
+        .filter(|h| valid_node(h))
+        .unwrap_or_else(|| "relume".into())
 }
 
 /// Three quarters of `MemTotal` in /proc/meminfo, or the default budget where it is unknown.
@@ -127,7 +150,12 @@ pub fn run(args: ServeArgs) -> Result<()> {
             Ok(()) => tracing::info!(target: "relume::server", "denoise: Open Image Denoise is available"),
             Err(e) => eprintln!("relume: warning: {e}; sessions asking for \"denoise\" will be refused"),
         }
-        eprintln!("relume: serving {} on http://{}/ (Ctrl-C to stop)", args.scenes.display(), listener.local_addr()?);
+        eprintln!(
+            "relume: node {} serving {} on http://{}/ (Ctrl-C to stop)",
+            state.config.node,
+            args.scenes.display(),
+            listener.local_addr()?
+        );
         server::run(listener, state, server::shutdown_signal()).await?;
         Ok(())
     });

@@ -46,6 +46,7 @@ impl TestServer {
             isa: None,
             limits,
             access,
+            node: "test-node".into(),
         };
         let state = Arc::new(AppState::new(config).expect("server state"));
         let addr = listener.local_addr().unwrap();
