@@ -76,9 +76,27 @@ fn check_origin(s: &Shared, headers: &axum::http::HeaderMap) -> Result<(), ApiEr
     ))
 }
 
+/// The longest close reason a WebSocket allows: a control frame carries at most 125 bytes,
+/// two of them the code (RFC 6455 §5.5).
+const MAX_CLOSE_REASON: usize = 123;
+
+/// A close frame whose reason is the JSON `{error, detail}`, the detail shortened (ending in
+/// "…") until the reason fits [`MAX_CLOSE_REASON`]; a longer one would be a protocol error at
+/// the client, which then never sees the code.
 fn close(code: u16, error: &str, detail: &str) -> Message {
-    let reason = serde_json::json!({"error": error, "detail": detail}).to_string();
-    Message::Close(Some(axum::extract::ws::CloseFrame { code, reason: reason.into() }))
+    Message::Close(Some(axum::extract::ws::CloseFrame { code, reason: close_reason(error, detail).into() }))
+}
+
+fn close_reason(error: &str, detail: &str) -> String {
+    let mut kept = detail.to_string();
+    loop {
+        let shown = if kept.len() < detail.len() { format!("{kept}…") } else { kept.clone() };
+        let reason = serde_json::json!({"error": error, "detail": shown}).to_string();
+        if reason.len() <= MAX_CLOSE_REASON || kept.is_empty() {
+            return reason;
+        }
+        kept.pop();
+    }
 }
 
 struct Subscription {
@@ -130,7 +148,7 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
                 if changed.is_err() {
                     let message = match entry.handle.failure() {
                         Some(reason) => close(CLOSE_SESSION_FAILED, "session_failed", &format!("session {} failed: {reason}", entry.id)),
-                        None => close(CLOSE_SESSION_GONE, "session_closed", &format!("session {} was deleted (by a client, or idle for longer than --session-idle)", entry.id)),
+                        None => close(CLOSE_SESSION_GONE, "session_closed", &format!("session {} deleted (by a client, or idle past --session-idle)", entry.id)),
                     };
                     let _ = socket.send(message).await;
                     break;
@@ -239,4 +257,31 @@ async fn play(entry: &SessionEntry, name: &str, speed: f32) -> Result<(), ApiErr
     }
     let anim = Animation::load(&path).map_err(|e| ApiError::invalid(format!("anim: {e}")))?;
     entry.handle.play(anim, speed).await
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn close_reasons_fit_a_control_frame_and_stay_json() {
+        // Property: however long the detail (a failure message, a long node name in the
+        // session id, characters JSON escapes or that take several bytes), the reason fits 123
+        // bytes and parses as {error, detail}; a short detail is kept whole. Negative control:
+        // the untruncated reason of the long detail does not fit.
+        let long = format!("session {}.s1-0 failed: \"quoted\" ünïcode {}", "n".repeat(63), "x".repeat(200));
+        let whole = serde_json::json!({"error": "session_failed", "detail": long}).to_string();
+        assert!(whole.len() > MAX_CLOSE_REASON);
+        for detail in [long.as_str(), "short", ""] {
+            let reason = close_reason("session_failed", detail);
+            assert!(reason.len() <= MAX_CLOSE_REASON, "{} bytes: {reason}", reason.len());
+            let parsed: serde_json::Value = serde_json::from_str(&reason).expect("JSON");
+            assert_eq!(parsed["error"], "session_failed");
+            let shown = parsed["detail"].as_str().expect("detail");
+            match detail.len() < 60 {
+                true => assert_eq!(shown, detail),
+                false => assert!(shown.ends_with('…') && detail.starts_with(shown.trim_end_matches('…'))),
+            }
+        }
+    }
 }
