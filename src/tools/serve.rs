@@ -150,12 +150,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
             Ok(()) => tracing::info!(target: "relume::server", "denoise: Open Image Denoise is available"),
             Err(e) => eprintln!("relume: warning: {e}; sessions asking for \"denoise\" will be refused"),
         }
-        eprintln!(
-            "relume: node {} serving {} on http://{}/ (Ctrl-C to stop)",
-            state.config.node,
-            args.scenes.display(),
-            listener.local_addr()?
-        );
+        tracing::info!(target: "relume::server", "node {}: session ids start with \"{}.\"", state.config.node, state.config.node);
+        eprintln!("relume: serving {} on http://{}/ (Ctrl-C to stop)", args.scenes.display(), listener.local_addr()?);
         server::run(listener, state, server::shutdown_signal()).await?;
         Ok(())
     });
