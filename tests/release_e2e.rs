@@ -29,16 +29,28 @@ impl Served {
             .stderr(Stdio::piped())
             .spawn()
             .expect("relume serve starts");
-        let mut lines = BufReader::new(child.stderr.take().expect("stderr")).lines();
+        // Stderr is read on its own thread (and drained after, so the server never blocks on a
+        // full pipe); the address must come within a deadline, so a changed line fails the
+        // test instead of hanging it.
+        let stderr = child.stderr.take().expect("stderr");
+        let (tx, rx) = std::sync::mpsc::channel::<String>();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+                let _ = tx.send(line);
+            }
+        });
+        let deadline = Instant::now() + Duration::from_secs(60);
         let addr = loop {
-            let line = lines.next().expect("serve printed its address before exiting").expect("stderr line");
+            let left = deadline.saturating_duration_since(Instant::now());
+            let Ok(line) = rx.recv_timeout(left) else {
+                let _ = child.kill();
+                panic!("relume serve printed no 'relume: serving … on http://ADDR/' line within 60 s");
+            };
             // "relume: serving DIR on http://ADDR/ (Ctrl-C to stop)"
             if let Some(rest) = line.strip_prefix("relume: serving").and_then(|l| l.split(" on http://").nth(1)) {
                 break rest.split('/').next().unwrap_or_default().to_string();
             }
         };
-        // Keep draining stderr so the server never blocks on a full pipe.
-        std::thread::spawn(move || lines.for_each(drop));
         Served { child, addr }
     }
 
