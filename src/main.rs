@@ -9,12 +9,13 @@
 //! - `relume bench particles SCENE.json [--anim NAME.anim.json --frames F] [--particles N] [--json FILE]`
 //! - `relume bench error SCENE.json [--anim NAME.anim.json --frames F --every K] --techniques LIST [--ref-spp S] [--out DIR]`
 //! - `relume bench fairness [--url URL] [--scene NAME] [--technique SPEC] [--hz H] [--spammers K] [--duration 15s]`
+//! - `relume migrate --from URL --to URL (--all | --session ID…) [--json FILE]`
 //! - `relume load --url URL --scene NAME --anim NAME.anim.json --sessions N --hz H --duration 60s [--open-loop] [--timeout 30s]`
 //!
 //! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
 use clap::{Parser, Subcommand};
 use relume::tools::{
-    bench, bench_error, bench_fairness, bench_icache, bench_particles, bench_reuse, load, render, serve,
+    bench, bench_error, bench_fairness, bench_icache, bench_particles, bench_reuse, load, migrate, render, serve,
 };
 use std::process::ExitCode;
 
@@ -37,6 +38,8 @@ enum Command {
     Render(render::RenderArgs),
     /// Load-test a running server with scripted animations over WebSocket.
     Load(load::LoadArgs),
+    /// Move sessions from one node to another: snapshot, restore, delete.
+    Migrate(migrate::MigrateArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -72,6 +75,7 @@ fn main() -> ExitCode {
         Command::Serve(args) => serve::run(args),
         Command::Render(args) => render::run(args),
         Command::Load(args) => load::run(args),
+        Command::Migrate(args) => migrate::run(args),
         Command::Bench { which: BenchCommand::Rays(args) } => bench::rays(args),
         Command::Bench { which: BenchCommand::Reuse(args) } => bench_reuse::run(args),
         Command::Bench { which: BenchCommand::Icache(args) } => bench_icache::run(args),

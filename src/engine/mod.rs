@@ -95,6 +95,22 @@ pub struct Session {
     /// Sequence number of the last accepted edit batch (the first is 1).
     accepted_batches: u64,
     denoise: Option<DenoiseStage>,
+    /// Set by [`Session::resume`]: the next tick's stats say the session was restored.
+    restored: bool,
+}
+
+/// Where a session stands between ticks, beyond its scene: what a snapshot carries so another
+/// process can continue it ([`Session::progress`], [`Session::resume`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Progress {
+    /// Ticks run so far.
+    pub tick: u64,
+    /// Edit batches accepted so far.
+    pub edits_accepted: u64,
+    /// The film's accumulation id.
+    pub accumulation_id: u64,
+    /// Queued edits, coalesced.
+    pub pending: Vec<Edit>,
 }
 
 impl Session {
@@ -114,7 +130,32 @@ impl Session {
             pending_received: 0,
             accepted_batches: 0,
             denoise: None,
+            restored: false,
         })
+    }
+
+    /// Where the session stands (for a snapshot).
+    pub fn progress(&self) -> Progress {
+        Progress {
+            tick: self.tick,
+            edits_accepted: self.accepted_batches,
+            accumulation_id: self.film.accumulation_id,
+            pending: self.pending.clone(),
+        }
+    }
+
+    /// Continues from `progress` (a snapshot's): the next tick is `progress.tick`, the pending
+    /// edits are validated against the scene and queued, and that tick starts a new
+    /// accumulation after the snapshot's (until then [`Session::progress`] is the snapshot's).
+    /// The technique's state was built fresh with the session, and the next tick's stats say
+    /// `restored`.
+    pub fn resume(&mut self, progress: Progress) -> Result<(), SceneError> {
+        self.pending = edits::queue(&self.scene, &[], progress.pending)?;
+        self.tick = progress.tick;
+        self.accepted_batches = progress.edits_accepted;
+        self.film.accumulation_id = progress.accumulation_id;
+        self.restored = true;
+        Ok(())
     }
 
     /// Denoises every frame from the next tick on (OIDN's device and filter are made now, once).
@@ -200,7 +241,7 @@ impl Session {
         let t = Instant::now();
         let ctx = RenderContext { scene: &self.scene, accel: &self.accel, seed: self.seed, tick: self.tick };
         self.technique.update(&ctx, &delta)?;
-        if self.technique.restarts_whole_film(&delta) {
+        if self.technique.restarts_whole_film(&delta) || self.restored {
             self.film.reset();
         }
         if let Some(stage) = &mut self.denoise {
@@ -239,6 +280,7 @@ impl Session {
             paths_per_pixel: self.film.mean_paths_per_pixel(),
             accumulation_id: self.film.accumulation_id,
             aux_rays,
+            restored: std::mem::take(&mut self.restored),
             detail: render.detail,
         };
         let frame = Frame {

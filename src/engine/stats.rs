@@ -43,5 +43,9 @@ pub struct TickStats {
     /// when the session does not denoise).
     #[serde(default)]
     pub aux_rays: u64,
+    /// True on the first tick after a restore from a snapshot: the technique rebuilt (retraced)
+    /// its state. Absent otherwise.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub restored: bool,
     pub detail: TechniqueStats,
 }

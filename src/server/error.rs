@@ -42,8 +42,16 @@ impl ApiError {
 }
 
 impl IntoResponse for ApiError {
+    /// A 503 (a draining node, the connection limit, a missing denoiser) says when to try
+    /// again: `Retry-After: 1`, time enough for a proxy to pick another node.
     fn into_response(self) -> Response {
-        (self.status, Json(ErrorBody { error: self.error.to_string(), detail: self.detail })).into_response()
+        let unavailable = self.status == StatusCode::SERVICE_UNAVAILABLE;
+        let mut resp =
+            (self.status, Json(ErrorBody { error: self.error.to_string(), detail: self.detail })).into_response();
+        if unavailable {
+            resp.headers_mut().insert(axum::http::header::RETRY_AFTER, axum::http::HeaderValue::from_static("1"));
+        }
+        resp
     }
 }
 

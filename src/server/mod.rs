@@ -8,12 +8,14 @@
 //! worker thread (`worker.rs`) inside the shared rayon pool. No lock is held across `.await`.
 //! Errors: every client fault is a 4xx JSON `{error, detail}`; internal faults are 500s with a
 //! log line. When a token is configured, every `/v1` route requires `Authorization: Bearer`.
+mod create;
 pub mod encoded;
 pub mod error;
 mod listen;
 pub mod metrics;
 pub mod protocol;
 pub mod routes;
+pub mod snapshot;
 pub mod state;
 pub mod turns;
 pub mod worker;
@@ -145,6 +147,7 @@ async fn count_rejections(State(s): State<Shared>, req: Request, next: Next) -> 
             StatusCode::TOO_MANY_REQUESTS => "too_many_sessions",
             StatusCode::MISDIRECTED_REQUEST => "host_not_allowed",
             StatusCode::FORBIDDEN => "origin_not_allowed",
+            StatusCode::SERVICE_UNAVAILABLE => "unavailable",
             _ if status.is_server_error() => "internal",
             _ => "other",
         };
@@ -193,6 +196,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/sessions/{id}/edits", post(routes::post_edits))
         .route("/sessions/{id}/tick", post(routes::post_tick))
         .route("/sessions/{id}/stats", get(routes::get_stats))
+        .route("/sessions/{id}/snapshot", get(routes::get_snapshot))
         .route("/sessions/{id}/ws", get(ws::upgrade))
         .route("/sessions/{id}/{file}", get(routes::get_frame))
         .layer(middleware::from_fn_with_state(state.clone(), require_token));
@@ -260,8 +264,17 @@ pub async fn run(
     Ok(())
 }
 
-/// Resolves on SIGINT or SIGTERM.
-pub async fn shutdown_signal() {
+/// The signal that asked the process to stop.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StopSignal {
+    /// SIGINT (Ctrl-C): stop now.
+    Interrupt,
+    /// SIGTERM (Kubernetes, systemd, `kill`): drain first.
+    Terminate,
+}
+
+/// Resolves on SIGINT or SIGTERM, saying which.
+pub async fn stop_signal() -> StopSignal {
     let ctrl_c = async {
         let _ = tokio::signal::ctrl_c().await;
     };
@@ -277,7 +290,33 @@ pub async fn shutdown_signal() {
     #[cfg(not(unix))]
     let term = std::future::pending::<()>();
     tokio::select! {
-        _ = ctrl_c => {},
-        _ = term => {},
+        _ = ctrl_c => StopSignal::Interrupt,
+        _ = term => StopSignal::Terminate,
+    }
+}
+
+/// The shutdown future of `relume serve`. SIGINT stops at once. SIGTERM drains: the node
+/// refuses new sessions (503 with `Retry-After`, and `/healthz` answers 503 `draining`, so a
+/// proxy sends creates elsewhere) and goes on serving its sessions, so `relume migrate` can
+/// move them, until `grace` has passed, no session is left, or a second signal comes.
+pub async fn drain_on_terminate(state: Arc<AppState>, grace: std::time::Duration) {
+    if stop_signal().await == StopSignal::Interrupt {
+        return;
+    }
+    state.draining.store(true, std::sync::atomic::Ordering::Relaxed);
+    tracing::info!(
+        target: "relume::server",
+        "SIGTERM: draining; new sessions are refused, {} session(s) served for up to {grace:?}",
+        state.session_count()
+    );
+    let empty = async {
+        while state.session_count() > 0 {
+            tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+        }
+    };
+    tokio::select! {
+        _ = tokio::time::sleep(grace) => tracing::info!(target: "relume::server", "drain grace over; shutting down"),
+        _ = empty => tracing::info!(target: "relume::server", "no session left; shutting down"),
+        _ = stop_signal() => tracing::info!(target: "relume::server", "second signal; shutting down"),
     }
 }

@@ -15,11 +15,15 @@ pub struct ErrorBody {
     pub detail: String,
 }
 
-/// `POST /v1/sessions`. `scene` is a bundled scene's name or an inline scene document.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// `POST /v1/sessions`. `scene` is a bundled scene's name or an inline scene document; or
+/// `snapshot` alone restores a session from [`Snapshot`] (taken on any node).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CreateSession {
-    pub scene: serde_json::Value,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene: Option<serde_json::Value>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub snapshot: Option<Box<Snapshot>>,
     #[serde(default)]
     pub technique: Option<TechniqueConfig>,
     #[serde(default)]
@@ -36,8 +40,78 @@ pub struct CreateSession {
     pub denoise: Option<DenoiseSettings>,
 }
 
+impl CreateSession {
+    /// A create request for `scene` (a bundled name or an inline document) with the defaults.
+    pub fn scene(scene: serde_json::Value) -> CreateSession {
+        CreateSession { scene: Some(scene), seed: default_seed(), ..CreateSession::default() }
+    }
+
+    /// The fields a restore must leave out: the snapshot carries them all.
+    pub fn fields_besides_snapshot(&self) -> Vec<&'static str> {
+        let given = [
+            ("scene", self.scene.is_some()),
+            ("technique", self.technique.is_some()),
+            ("width", self.width.is_some()),
+            ("height", self.height.is_some()),
+            ("seed", self.seed != default_seed()),
+            ("tick_hz", self.tick_hz.is_some()),
+            ("denoise", self.denoise.is_some()),
+        ];
+        given.iter().filter(|(_, g)| *g).map(|(f, _)| *f).collect()
+    }
+}
+
 fn default_seed() -> u64 {
     1
+}
+
+/// The one snapshot format this server writes and reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum SnapshotFormat {
+    #[serde(rename = "relume.snapshot/1")]
+    V1,
+}
+
+/// `GET /v1/sessions/{id}/snapshot`: everything needed to continue a session on another node
+/// (`proto/snapshot.schema.json`). The technique's resident state is not in it: a restored
+/// session rebuilds it on its first tick, which reports `restored: true`. The film's
+/// accumulated samples are not in it either: the restored session starts a new accumulation
+/// (`accumulation_id` + 1) at tick `tick`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Snapshot {
+    pub format: SnapshotFormat,
+    /// The session it was taken from, and that session's node (for the record only).
+    pub session: String,
+    /// The bundled scene's name (its animations stay playable by name), or `"inline"`.
+    pub scene_name: String,
+    /// The scene with every applied edit in it, at the session's resolution.
+    pub scene: crate::scene::SceneDesc,
+    pub technique: TechniqueConfig,
+    pub seed: u64,
+    pub tick_hz: Option<f32>,
+    pub denoise: Option<DenoiseSettings>,
+    /// Ticks run so far: the restored session's next tick has this number.
+    pub tick: u64,
+    /// Edit batches accepted so far: the restored session numbers the next one `+ 1`.
+    pub edits_accepted: u64,
+    /// The accumulation the last frame belonged to.
+    pub accumulation_id: u64,
+    /// Edits accepted but not applied yet (coalesced, one per target): the next tick applies
+    /// them.
+    pub pending_edits: Vec<Edit>,
+    /// The animation the server was playing, and where its clock stood.
+    pub animation: Option<PlayingAnimation>,
+}
+
+/// An animation the server plays for a session: `clock_s` animation seconds have elapsed, and
+/// it advances `speed` animation seconds per second.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlayingAnimation {
+    pub animation: crate::scene::animation::Animation,
+    pub speed: f32,
+    pub clock_s: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

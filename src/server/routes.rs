@@ -67,8 +67,11 @@ pub fn parse_body<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     })
 }
 
-pub async fn healthz() -> &'static str {
-    "ok\n"
+/// `ok` while the node takes sessions; 503 `draining` (with `Retry-After`) once it drains, so
+/// a proxy's health check stops sending it new sessions while its own still reach it.
+pub async fn healthz(State(s): State<Shared>) -> Result<&'static str, ApiError> {
+    s.refuse_if_draining()?;
+    Ok("ok\n")
 }
 
 pub async fn metrics(State(s): State<Shared>) -> Response {
@@ -84,6 +87,7 @@ pub async fn create_session(
     State(s): State<Shared>,
     ApiJson(req): ApiJson<CreateSession>,
 ) -> Result<(StatusCode, Json<SessionView>), ApiError> {
+    s.refuse_if_draining()?;
     let state = s.clone();
     let created = tokio::task::spawn_blocking(move || state.create_session(req).map(|v| Created::new(state, v)))
         .await
@@ -156,6 +160,16 @@ pub async fn get_scene(
 ) -> Result<Json<crate::scene::SceneDesc>, ApiError> {
     let entry = s.session(&id)?;
     Ok(Json(entry.handle.scene().await?))
+}
+
+/// The session's snapshot (`proto/snapshot.schema.json`), to restore with `POST /v1/sessions`.
+pub async fn get_snapshot(
+    State(s): State<Shared>,
+    Path(id): Path<String>,
+) -> Result<Json<super::protocol::Snapshot>, ApiError> {
+    let entry = s.session(&id)?;
+    let parts = entry.handle.snapshot().await?;
+    Ok(Json(super::snapshot::snapshot_of(&entry, parts)))
 }
 
 pub async fn post_edits(

@@ -1,13 +1,12 @@
 //! Server state: configuration, limits, the Embree device, the rayon pool and the sessions.
 use super::error::ApiError;
 use super::metrics::Metrics;
-use super::protocol::{CreateSession, SceneEntry, SessionLinks, SessionView};
-use super::worker::{SessionHandle, WorkerContext};
+use super::protocol::{SceneEntry, SessionLinks, SessionView};
+use super::worker::SessionHandle;
 use crate::embree::Device;
-use crate::engine::Session;
-use crate::film::{DenoiseError, DenoiseSettings};
-use crate::scene::{Scene, SceneBudget, SceneError};
-use crate::technique::{path::PathConfig, TechniqueConfig, TechniqueError};
+use crate::film::DenoiseSettings;
+use crate::scene::SceneBudget;
+use crate::technique::TechniqueConfig;
 use axum::http::StatusCode;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -60,25 +59,6 @@ impl Limits {
             max_objects: self.max_objects,
             max_lights: self.max_lights,
         }
-    }
-}
-
-/// The denoiser could not start: 422 when this build lacks it, 503 when OIDN is missing.
-fn denoise_error(e: crate::engine::EngineError) -> ApiError {
-    match e {
-        crate::engine::EngineError::Denoise(d @ DenoiseError::NotBuilt) => ApiError::invalid(d.to_string()),
-        crate::engine::EngineError::Denoise(d @ DenoiseError::Unavailable(_)) => {
-            ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "denoise_unavailable", d.to_string())
-        }
-        other => ApiError::internal(other.to_string()),
-    }
-}
-
-/// A scene that failed to load: 413 over the budget, 422 otherwise; `prefix` names where.
-fn scene_error(prefix: &str, e: SceneError) -> ApiError {
-    match e {
-        SceneError::TooLarge { .. } => ApiError::too_large(format!("{prefix}{e}")),
-        _ => ApiError::invalid(format!("{prefix}{e}")),
     }
 }
 
@@ -156,30 +136,32 @@ pub struct SessionEntry {
     pub seed: u64,
     pub tick_hz: Option<f32>,
     pub denoise: Option<DenoiseSettings>,
+    /// The number of its first tick: 0, or the snapshot's tick for a restored session.
+    pub first_tick: u64,
     /// Milliseconds after the server's start of the last request or WebSocket message.
-    last_active: AtomicU64,
+    pub(super) last_active: AtomicU64,
     pub handle: SessionHandle,
     /// Its place in the session count, released when the entry drops.
-    _reservation: Reservation,
+    pub(super) _reservation: Reservation,
 }
 
 /// What the live sessions and those being created hold: a count and estimated bytes.
 #[derive(Debug, Default)]
-struct Reserved {
-    sessions: usize,
-    bytes: u64,
+pub(super) struct Reserved {
+    pub(super) sessions: usize,
+    pub(super) bytes: u64,
 }
 
 /// A session's place among `max_sessions`, taken before its scene is loaded (so concurrent
 /// creations cannot exceed the limit) and given back on drop, whether the creation failed or
 /// the session was deleted.
 pub struct Reservation {
-    table: Arc<std::sync::Mutex<Reserved>>,
+    pub(super) table: Arc<std::sync::Mutex<Reserved>>,
 }
 
 impl Reservation {
     /// Reserves `bytes` of the server's memory budget unless its total would exceed `limit`.
-    fn memory(&self, bytes: u64, limit: u64) -> Result<MemoryReservation, ApiError> {
+    pub(super) fn memory(&self, bytes: u64, limit: u64) -> Result<MemoryReservation, ApiError> {
         let mut r = self.table.lock().map_err(|_| ApiError::internal("reservation lock poisoned"))?;
         if r.bytes.saturating_add(bytes) > limit {
             return Err(ApiError::new(
@@ -232,12 +214,15 @@ pub struct AppState {
     /// connection count).
     pub sockets: Arc<tokio::sync::Semaphore>,
     pub sessions: RwLock<HashMap<String, Arc<SessionEntry>>>,
-    reserved: Arc<std::sync::Mutex<Reserved>>,
-    next_id: AtomicU64,
+    pub(super) reserved: Arc<std::sync::Mutex<Reserved>>,
+    pub(super) next_id: AtomicU64,
     /// The clock of every session's `last_active`.
     started: std::time::Instant,
     /// Flips to true when the server begins shutting down; WebSocket loops watch it.
     pub shutting_down: tokio::sync::watch::Sender<bool>,
+    /// Set on SIGTERM ([`super::drain`]): creates are refused with 503, `/healthz` says
+    /// `draining`, and the sessions go on being served until the grace period ends.
+    pub draining: std::sync::atomic::AtomicBool,
 }
 
 /// A bundled scene name: letters, digits, `-` and `_`; no path separators.
@@ -263,6 +248,7 @@ impl AppState {
             next_id: AtomicU64::new(1),
             started: std::time::Instant::now(),
             shutting_down,
+            draining: Default::default(),
         })
     }
 
@@ -284,7 +270,7 @@ impl AppState {
         entry.last_active.store(self.now_ms(), Ordering::Relaxed);
     }
 
-    fn now_ms(&self) -> u64 {
+    pub(super) fn now_ms(&self) -> u64 {
         self.started.elapsed().as_millis() as u64
     }
 
@@ -315,6 +301,23 @@ impl AppState {
         self.reserved.lock().map(|r| r.bytes).unwrap_or(0)
     }
 
+    /// Whether this node is draining (SIGTERM): it takes no new sessions.
+    pub fn is_draining(&self) -> bool {
+        self.draining.load(Ordering::Relaxed)
+    }
+
+    /// 503 with `Retry-After` while draining: another node should take the session.
+    pub fn refuse_if_draining(&self) -> Result<(), ApiError> {
+        if self.is_draining() {
+            return Err(ApiError::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "draining",
+                format!("node '{}' is draining before it shuts down and takes no new sessions: retry, and the proxy will send you to another node", self.config.node),
+            ));
+        }
+        Ok(())
+    }
+
     pub fn session_count(&self) -> usize {
         self.sessions.read().map(|s| s.len()).unwrap_or(0)
     }
@@ -343,173 +346,6 @@ impl AppState {
                 SceneEntry { name, animations }
             })
             .collect()
-    }
-
-    /// Loads, checks against the limits and starts a session. CPU-heavy: call from
-    /// `spawn_blocking`.
-    pub fn create_session(&self, req: CreateSession) -> Result<SessionView, ApiError> {
-        let limits = &self.config.limits;
-        let reservation = self.reserve_session()?;
-        // The scene: a bundled name or an inline document confined to the scenes root.
-        let root = &self.config.scenes_root;
-        let (scene_name, scene_dir, mut scene) = match &req.scene {
-            serde_json::Value::String(name) => {
-                if !valid_name(name) {
-                    return Err(ApiError::invalid(format!(
-                        "scene: '{name}' is not a scene name (letters, digits, '-' and '_')"
-                    )));
-                }
-                let path = root.join(format!("{name}.json"));
-                if !path.is_file() {
-                    return Err(ApiError::not_found(format!("scene: no bundled scene '{name}' (see GET /v1/scenes)")));
-                }
-                let scene = Scene::load_within(&path, root, &limits.scene_budget())
-                    .map_err(|e| scene_error(&format!("scene '{name}': "), e))?;
-                (name.clone(), Some(root.clone()), scene)
-            }
-            serde_json::Value::Object(_) => {
-                let desc = crate::scene::load::parse_json(&req.scene.to_string())
-                    .map_err(|e| ApiError::invalid(format!("scene.{e}")))?;
-                let scene = Scene::from_desc_within(desc, root, root, &limits.scene_budget())
-                    .map_err(|e| scene_error("scene.", e))?;
-                ("inline".to_string(), None, scene)
-            }
-            _ => return Err(ApiError::invalid("scene: expected a scene name (string) or an inline scene (object)")),
-        };
-        let (w, h) = (req.width.unwrap_or(scene.camera.width), req.height.unwrap_or(scene.camera.height));
-        if w == 0 || h == 0 {
-            return Err(ApiError::invalid("width/height: must be at least 1"));
-        }
-        if w > limits.max_side || h > limits.max_side || (w as u64) * (h as u64) > limits.max_pixels {
-            return Err(ApiError::too_large(format!(
-                "width/height: {w}x{h} exceeds the limit ({} per side, {} pixels)",
-                limits.max_side, limits.max_pixels
-            )));
-        }
-        scene.set_resolution(w, h);
-        let technique = req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default()));
-        if technique.spp_per_tick() > limits.max_spp_per_tick {
-            return Err(ApiError::too_large(format!(
-                "technique.spp: {} exceeds the limit of {} per tick",
-                technique.spp_per_tick(),
-                limits.max_spp_per_tick
-            )));
-        }
-        if technique.photon_paths() > limits.max_photon_paths {
-            return Err(ApiError::too_large(format!(
-                "technique.paths: {} exceeds the limit of {} photon paths per session",
-                technique.photon_paths(),
-                limits.max_photon_paths
-            )));
-        }
-        if let Some(hz) = req.tick_hz {
-            if !(hz.is_finite() && (MIN_TICK_HZ..=limits.max_tick_hz).contains(&hz)) {
-                return Err(ApiError::invalid(format!(
-                    "tick_hz: must lie in [{MIN_TICK_HZ}, {}] ticks per second",
-                    limits.max_tick_hz
-                )));
-            }
-        }
-
-        let memory_bytes = self.check_memory(&technique, req.denoise, &scene, u64::from(w) * u64::from(h))?;
-        let memory = reservation.memory(memory_bytes, limits.server_memory)?;
-        let mut session = Session::new(scene, &technique, req.seed, &self.device).map_err(|e| match e {
-            crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
-                ApiError::invalid(format!("technique: {t}"))
-            }
-            crate::engine::EngineError::Technique(t @ TechniqueError::TooLarge { .. }) => {
-                ApiError::too_large(format!("technique.{t}"))
-            }
-            crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("scene: {s}")),
-            other => ApiError::internal(other.to_string()),
-        })?;
-        if let Some(settings) = req.denoise {
-            session.enable_denoise(settings).map_err(denoise_error)?;
-        }
-        let n = self.next_id.fetch_add(1, Ordering::Relaxed);
-        let salt = std::time::SystemTime::now()
-            .duration_since(std::time::UNIX_EPOCH)
-            .map(|d| d.as_nanos() as u64)
-            .unwrap_or(0);
-        let id = format!("{}.s{n}-{:08x}", self.config.node, crate::core::rng::mix64(salt ^ n) as u32);
-        let context = WorkerContext {
-            pool: self.pool.clone(),
-            turns: self.turns.clone(),
-            metrics: self.metrics.clone(),
-            max_tick_hz: limits.max_tick_hz,
-        };
-        let handle = SessionHandle::spawn(&id, session, memory, req.tick_hz, context)
-            .map_err(|e| ApiError::internal(format!("cannot start the session thread: {e}")))?;
-        let entry = Arc::new(SessionEntry {
-            id: id.clone(),
-            scene: scene_name,
-            scene_dir,
-            technique,
-            width: w,
-            height: h,
-            seed: req.seed,
-            tick_hz: req.tick_hz,
-            denoise: req.denoise,
-            last_active: AtomicU64::new(self.now_ms()),
-            handle,
-            _reservation: reservation,
-        });
-        self.sessions
-            .write()
-            .map_err(|_| ApiError::internal("session table lock poisoned"))?
-            .insert(id.clone(), entry.clone());
-        self.metrics.sessions_created.fetch_add(1, Ordering::Relaxed);
-        Ok(view(&entry))
-    }
-
-    /// Takes a place among `max_sessions` atomically (429 when there is none).
-    fn reserve_session(&self) -> Result<Reservation, ApiError> {
-        let max = self.config.limits.max_sessions;
-        let mut r = self.reserved.lock().map_err(|_| ApiError::internal("reservation lock poisoned"))?;
-        if r.sessions >= max {
-            return Err(ApiError::new(
-                StatusCode::TOO_MANY_REQUESTS,
-                "too_many_sessions",
-                format!("the server holds its maximum of {max} sessions"),
-            ));
-        }
-        r.sessions += 1;
-        Ok(Reservation { table: self.reserved.clone() })
-    }
-
-    /// The session's estimated resident bytes (technique and film), refused with 413 naming
-    /// the technique's sizing field when over `session_memory`.
-    fn check_memory(
-        &self,
-        technique: &TechniqueConfig,
-        denoise: Option<DenoiseSettings>,
-        scene: &Scene,
-        pixels: u64,
-    ) -> Result<u64, ApiError> {
-        let limit = self.config.limits.session_memory;
-        let estimate = technique.resident_estimate(scene, pixels).map_err(|e| match e {
-            TechniqueError::TooLarge { .. } => ApiError::too_large(format!("technique.{e}")),
-            other => ApiError::invalid(format!("technique: {other}")),
-        })?;
-        let film = pixels * crate::film::Film::BYTES_PER_PIXEL;
-        let denoiser = denoise.map_or(0, |d| d.resident_estimate(pixels));
-        let bytes = estimate.bytes.saturating_add(film).saturating_add(denoiser);
-        if bytes > limit && denoiser > 0 && estimate.bytes.saturating_add(film) <= limit {
-            return Err(ApiError::too_large(format!(
-                "denoise: the session would hold about {} MiB with its denoiser, above the {} MiB a session may hold (--session-memory)",
-                bytes >> 20,
-                limit >> 20
-            )));
-        }
-        if bytes > limit {
-            return Err(ApiError::too_large(format!(
-                "technique.{}: the session would hold about {} MiB, above the {} MiB a session may hold (--session-memory)",
-                estimate.field,
-                bytes >> 20,
-                limit >> 20
-            )));
-        }
-        Ok(bytes)
     }
 
     /// Removes a session and stops its worker (blocking: call from `spawn_blocking`).
@@ -556,7 +392,7 @@ pub fn view(e: &SessionEntry) -> SessionView {
         seed: e.seed,
         tick_hz: e.tick_hz,
         denoise: e.denoise,
-        ticks: last_stats.as_ref().map_or(0, |s| s.tick + 1),
+        ticks: last_stats.as_ref().map_or(e.first_tick, |s| s.tick + 1),
         state: if failure.is_some() { "failed".into() } else { "running".into() },
         failure,
         last_stats,
@@ -566,6 +402,7 @@ pub fn view(e: &SessionEntry) -> SessionView {
 
 #[cfg(test)]
 mod tests {
+    use super::super::protocol::CreateSession;
     use super::*;
     use std::time::Instant;
 

@@ -21,11 +21,10 @@
 //! and stats history stay inspectable until it is deleted.
 use super::error::ApiError;
 use super::metrics::Metrics;
-use super::protocol::EditsAccepted;
+use super::protocol::{EditsAccepted, PlayingAnimation};
 use super::state::MemoryReservation;
 use super::turns::Turns;
 use crate::engine::{Session, TickStats};
-use crate::scene::animation::Animation;
 use crate::scene::edits::Edit;
 use axum::http::StatusCode;
 use std::collections::VecDeque;
@@ -62,8 +61,7 @@ pub enum Command {
     /// Run one tick and answer every client waiting in [`SessionHandle`]'s tick waiters.
     Tick,
     Play {
-        anim: Box<Animation>,
-        speed: f32,
+        playing: Box<PlayingAnimation>,
         reply: oneshot::Sender<Result<(), ApiError>>,
     },
     Pause,
@@ -71,10 +69,22 @@ pub enum Command {
     Scene {
         reply: oneshot::Sender<Result<crate::scene::SceneDesc, ApiError>>,
     },
+    /// The scene, where the session stands, and the animation playing.
+    Snapshot {
+        reply: oneshot::Sender<Result<SnapshotParts, ApiError>>,
+    },
     Shutdown,
     /// Panics inside a tick's turn, as a failing technique would (tests of the failure path).
     #[cfg(test)]
     Panic,
+}
+
+/// What a snapshot takes from the worker: the scene with its edits applied, the session's
+/// progress, and the animation playing with its clock now.
+pub struct SnapshotParts {
+    pub scene: crate::scene::SceneDesc,
+    pub progress: crate::engine::Progress,
+    pub animation: Option<PlayingAnimation>,
 }
 
 /// The handle the server keeps for a session.
@@ -249,6 +259,7 @@ impl SessionHandle {
         session: Session,
         memory: MemoryReservation,
         tick_hz: Option<f32>,
+        playing: Option<PlayingAnimation>,
         context: WorkerContext,
     ) -> std::io::Result<SessionHandle> {
         let (tx, rx) = mpsc::sync_channel(COMMAND_QUEUE);
@@ -264,8 +275,9 @@ impl SessionHandle {
             tick_waiters: tick_waiters.clone(),
             last_tick: None,
         };
-        let thread =
-            std::thread::Builder::new().name(format!("session-{id}")).spawn(move || run(worker, rx, tick_hz))?;
+        let thread = std::thread::Builder::new()
+            .name(format!("session-{id}"))
+            .spawn(move || run(worker, rx, tick_hz, playing))?;
         Ok(SessionHandle {
             commands: Mutex::new(tx),
             tick_waiters,
@@ -320,10 +332,17 @@ impl SessionHandle {
         answer.await.map_err(|_| gone())?
     }
 
-    /// Plays an animation on the server's clock; it is validated against the session's scene.
-    pub async fn play(&self, anim: Animation, speed: f32) -> Result<(), ApiError> {
+    /// Plays an animation on the server's clock from `playing.clock_s`; it is validated
+    /// against the session's scene.
+    pub async fn play(&self, playing: PlayingAnimation) -> Result<(), ApiError> {
         let (reply, answer) = oneshot::channel();
-        self.send(Command::Play { anim: Box::new(anim), speed, reply })?;
+        self.send(Command::Play { playing: Box::new(playing), reply })?;
+        answer.await.map_err(|_| gone())?
+    }
+
+    pub async fn snapshot(&self) -> Result<SnapshotParts, ApiError> {
+        let (reply, answer) = oneshot::channel();
+        self.send(Command::Snapshot { reply })?;
         answer.await.map_err(|_| gone())?
     }
 
@@ -359,10 +378,10 @@ impl SessionHandle {
 /// The worker thread: the command loop under `catch_unwind`, so a panic anywhere in it (not
 /// only inside a tick) marks the session failed, with its reason, instead of leaving it
 /// "running" with no thread behind it.
-fn run(w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
+fn run(w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, playing: Option<PlayingAnimation>) {
     let failure = w.failure.clone();
     let metrics = w.context.metrics.clone();
-    if let Err(panic) = std::panic::catch_unwind(AssertUnwindSafe(|| serve(w, rx, tick_hz))) {
+    if let Err(panic) = std::panic::catch_unwind(AssertUnwindSafe(|| serve(w, rx, tick_hz, playing))) {
         let reason = format!("panic in the session worker: {}", panic_message(&*panic));
         tracing::error!(target: "relume::server", "session failed: {reason}");
         metrics.sessions_failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
@@ -404,11 +423,26 @@ fn wait(rx: &mpsc::Receiver<Command>, next_tick: Option<Instant>, client_tick: O
     }
 }
 
+/// An animation playing since `started`, from `from.clock_s`.
+struct Playing {
+    from: PlayingAnimation,
+    started: Instant,
+}
+
+impl Playing {
+    /// The animation with its clock as of now.
+    fn now(&self) -> PlayingAnimation {
+        let clock_s = self.from.clock_s + self.started.elapsed().as_secs_f64() * f64::from(self.from.speed);
+        PlayingAnimation { clock_s, ..self.from.clone() }
+    }
+}
+
 /// The command loop: serve commands; tick on schedule while `tick_hz` is set or an animation
-/// plays, and for clients no sooner than the rate cap allows.
-fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
-    let mut playing: Option<(Box<Animation>, f32, Instant)> = None;
-    let mut next_tick = tick_hz.map(|_| Instant::now());
+/// plays (from the start when a restored session was playing one), and for clients no
+/// sooner than the rate cap allows.
+fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, restored: Option<PlayingAnimation>) {
+    let mut playing = restored.map(|from| Playing { from, started: Instant::now() });
+    let mut next_tick = (tick_hz.is_some() || playing.is_some()).then(Instant::now);
     let mut client_tick: Option<Instant> = None;
     while let Some(wake) = wait(&rx, next_tick, client_tick) {
         match wake {
@@ -427,15 +461,23 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
                 client_tick = None;
                 w.tick_for_waiters();
             }
-            Wake::Command(Command::Play { anim, speed, reply }) => {
+            Wake::Command(Command::Play { playing: p, reply }) => {
                 let checked = w.live().and_then(|l| {
-                    anim.validate(l.session.scene()).map_err(|e| ApiError::invalid(format!("anim: {e}")))
+                    p.animation.validate(l.session.scene()).map_err(|e| ApiError::invalid(format!("anim: {e}")))
                 });
                 if checked.is_ok() {
-                    playing = Some((anim, speed, Instant::now()));
+                    playing = Some(Playing { from: *p, started: Instant::now() });
                     next_tick.get_or_insert_with(Instant::now);
                 }
                 let _ = reply.send(checked);
+            }
+            Wake::Command(Command::Snapshot { reply }) => {
+                let parts = w.live().map(|l| SnapshotParts {
+                    scene: l.session.scene().desc().clone(),
+                    progress: l.session.progress(),
+                    animation: playing.as_ref().map(Playing::now),
+                });
+                let _ = reply.send(parts);
             }
             Wake::Command(Command::Pause) => {
                 playing = None;
@@ -451,9 +493,9 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>) {
             Wake::Command(Command::Panic) => w.panic_in_a_turn(),
             Wake::Scheduled => {
                 // Advance the animation, then tick.
-                if let Some((anim, speed, started)) = &playing {
-                    let t = started.elapsed().as_secs_f32() * speed;
-                    if w.queue(anim.edits_at(t)).is_err() {
+                if let Some(p) = &playing {
+                    let now = p.now();
+                    if w.queue(now.animation.edits_at(now.clock_s as f32)).is_err() {
                         playing = None;
                     }
                 }

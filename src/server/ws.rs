@@ -10,7 +10,7 @@
 //! A bad message gets an `error` reply and the connection stays open.
 use super::encoded::EncodingKey;
 use super::error::ApiError;
-use super::protocol::{ClientMessage, FrameFormat, FrameHeader, ServerMessage};
+use super::protocol::{ClientMessage, FrameFormat, FrameHeader, PlayingAnimation, ServerMessage};
 use super::routes::{parse_body, Shared};
 use super::state::{valid_name, SessionEntry};
 use crate::film::ImageFormat;
@@ -241,10 +241,17 @@ async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, by
     }
 }
 
-async fn play(entry: &SessionEntry, name: &str, speed: f32) -> Result<(), ApiError> {
-    if !(speed.is_finite() && speed > 0.0 && speed <= 100.0) {
-        return Err(ApiError::invalid("speed: must lie in (0, 100]"));
+/// An animation's playback speed must lie in (0, 100]; `field` names it in the error.
+pub fn check_speed(field: &str, speed: f32) -> Result<(), ApiError> {
+    if speed.is_finite() && speed > 0.0 && speed <= 100.0 {
+        Ok(())
+    } else {
+        Err(ApiError::invalid(format!("{field}: must lie in (0, 100]")))
     }
+}
+
+async fn play(entry: &SessionEntry, name: &str, speed: f32) -> Result<(), ApiError> {
+    check_speed("speed", speed)?;
     if !valid_name(name) {
         return Err(ApiError::invalid(format!("anim: '{name}' is not an animation name")));
     }
@@ -256,7 +263,7 @@ async fn play(entry: &SessionEntry, name: &str, speed: f32) -> Result<(), ApiErr
         return Err(ApiError::not_found(format!("anim: no animation '{name}' (see GET /v1/scenes)")));
     }
     let anim = Animation::load(&path).map_err(|e| ApiError::invalid(format!("anim: {e}")))?;
-    entry.handle.play(anim, speed).await
+    entry.handle.play(PlayingAnimation { animation: anim, speed, clock_s: 0.0 }).await
 }
 
 #[cfg(test)]

@@ -7,6 +7,7 @@ pub mod bench_icache;
 pub mod bench_particles;
 pub mod bench_reuse;
 pub mod load;
+pub mod migrate;
 pub mod render;
 pub mod serve;
 

@@ -1,4 +1,4 @@
-//! `relume serve`: runs the HTTP/WebSocket service until SIGINT or SIGTERM.
+//! `relume serve`: runs the HTTP/WebSocket service until SIGINT, or SIGTERM and a drain.
 use super::UsageError;
 use crate::server::{self, valid_node, Access, AppState, Limits, ServerConfig};
 use anyhow::{Context, Result};
@@ -36,9 +36,14 @@ pub struct ServeArgs {
     /// Seconds a connection may take to send a request's headers before it is closed.
     #[arg(long, default_value_t = 10)]
     pub header_timeout: u64,
-    /// Seconds shutdown (SIGINT, SIGTERM) waits for connections and sessions to finish.
+    /// Seconds shutdown waits for connections and sessions to finish.
     #[arg(long, default_value_t = 30)]
     pub drain_deadline: u64,
+    /// Seconds a node keeps serving its sessions after SIGTERM, refusing new ones with 503,
+    /// so they can be moved (`relume migrate`); it shuts down sooner when none is left.
+    /// SIGINT (Ctrl-C) stops at once.
+    #[arg(long, default_value_t = 30)]
+    pub drain_grace: u64,
     /// A host name the `Host` header may carry besides IP addresses and localhost (repeat for
     /// more); other names get 421, which stops DNS rebinding.
     #[arg(long = "allow-host")]
@@ -152,7 +157,8 @@ pub fn run(args: ServeArgs) -> Result<()> {
         }
         tracing::info!(target: "relume::server", "node {}: session ids start with \"{}.\"", state.config.node, state.config.node);
         eprintln!("relume: serving {} on http://{}/ (Ctrl-C to stop)", args.scenes.display(), listener.local_addr()?);
-        server::run(listener, state, server::shutdown_signal()).await?;
+        let grace = std::time::Duration::from_secs(args.drain_grace);
+        server::run(listener, state.clone(), server::drain_on_terminate(state, grace)).await?;
         Ok(())
     });
     // A session still ticking past the drain deadline must not hold the process open.

@@ -280,6 +280,7 @@ mod tests {
             paths_per_pixel: 1.0,
             accumulation_id: 0,
             aux_rays: 0,
+            restored: false,
             detail: crate::technique::TechniqueStats::Path(Default::default()),
         };
         text(&ServerMessage::Stats { stats: Box::new(frame), frames_dropped: 0 })

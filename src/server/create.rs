@@ -1,0 +1,273 @@
+//! Creating a session: from a bundled scene's name, an inline scene document, or a snapshot
+//! another node took (`snapshot.rs`). Every path is checked against the same [`Limits`]
+//! (resolution, spp, photon paths, tick rate, estimated memory) and the same scene
+//! confinement before anything is built; a creation holds its place among `max_sessions`
+//! from the start, so concurrent creations cannot exceed it.
+//!
+//! [`Limits`]: super::Limits
+use super::error::ApiError;
+use super::protocol::{CreateSession, PlayingAnimation, SessionView};
+use super::state::{valid_name, view, AppState, Reservation, SessionEntry, MIN_TICK_HZ};
+use super::worker::{SessionHandle, WorkerContext};
+use crate::engine::{Progress, Session};
+use crate::film::{DenoiseError, DenoiseSettings};
+use crate::scene::{Scene, SceneError};
+use crate::technique::{path::PathConfig, TechniqueConfig, TechniqueError};
+use axum::http::StatusCode;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+
+/// A session about to start: its scene loaded, its request parsed, not yet checked against
+/// the limits.
+pub(super) struct Plan {
+    pub scene_name: String,
+    /// Folder of the scene file, where its animations live (`None` for inline scenes).
+    pub scene_dir: Option<PathBuf>,
+    pub scene: Scene,
+    pub technique: TechniqueConfig,
+    pub width: u32,
+    pub height: u32,
+    pub seed: u64,
+    pub tick_hz: Option<f32>,
+    pub denoise: Option<DenoiseSettings>,
+    /// A restore: where the snapshot's session stood, and what it was playing.
+    pub resume: Option<(Progress, Option<PlayingAnimation>)>,
+    /// Prefix of the fields errors name: `""`, or `"snapshot."` for a restore.
+    pub field: &'static str,
+}
+
+/// The denoiser could not start: 422 when this build lacks it, 503 when OIDN is missing.
+fn denoise_error(e: crate::engine::EngineError) -> ApiError {
+    match e {
+        crate::engine::EngineError::Denoise(d @ DenoiseError::NotBuilt) => ApiError::invalid(d.to_string()),
+        crate::engine::EngineError::Denoise(d @ DenoiseError::Unavailable(_)) => {
+            ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "denoise_unavailable", d.to_string())
+        }
+        other => ApiError::internal(other.to_string()),
+    }
+}
+
+/// A scene that failed to load: 413 over the budget, 422 otherwise; `prefix` names where.
+pub(super) fn scene_error(prefix: &str, e: SceneError) -> ApiError {
+    match e {
+        SceneError::TooLarge { .. } => ApiError::too_large(format!("{prefix}{e}")),
+        _ => ApiError::invalid(format!("{prefix}{e}")),
+    }
+}
+
+impl AppState {
+    /// Loads, checks against the limits and starts a session, or restores one from a
+    /// snapshot. CPU-heavy: call from `spawn_blocking`.
+    pub fn create_session(&self, mut req: CreateSession) -> Result<SessionView, ApiError> {
+        let reservation = self.reserve_session()?;
+        let plan = match req.snapshot.take() {
+            Some(snapshot) => {
+                let extra = req.fields_besides_snapshot();
+                if !extra.is_empty() {
+                    return Err(ApiError::invalid(format!(
+                        "{}: a restore takes only 'snapshot', which carries them",
+                        extra.join(", ")
+                    )));
+                }
+                self.plan_restore(*snapshot)?
+            }
+            None => self.plan_new(req)?,
+        };
+        self.start(plan, reservation)
+    }
+
+    /// A new session from a bundled scene's name or an inline scene document.
+    fn plan_new(&self, req: CreateSession) -> Result<Plan, ApiError> {
+        let root = &self.config.scenes_root;
+        let budget = self.config.limits.scene_budget();
+        let (scene_name, scene_dir, scene) = match &req.scene {
+            Some(serde_json::Value::String(name)) => {
+                if !valid_name(name) {
+                    return Err(ApiError::invalid(format!(
+                        "scene: '{name}' is not a scene name (letters, digits, '-' and '_')"
+                    )));
+                }
+                let path = root.join(format!("{name}.json"));
+                if !path.is_file() {
+                    return Err(ApiError::not_found(format!("scene: no bundled scene '{name}' (see GET /v1/scenes)")));
+                }
+                let scene = Scene::load_within(&path, root, &budget)
+                    .map_err(|e| scene_error(&format!("scene '{name}': "), e))?;
+                (name.clone(), Some(root.clone()), scene)
+            }
+            Some(value @ serde_json::Value::Object(_)) => {
+                let desc = crate::scene::load::parse_json(&value.to_string())
+                    .map_err(|e| ApiError::invalid(format!("scene.{e}")))?;
+                let scene = Scene::from_desc_within(desc, root, root, &budget).map_err(|e| scene_error("scene.", e))?;
+                ("inline".to_string(), None, scene)
+            }
+            Some(_) => {
+                return Err(ApiError::invalid("scene: expected a scene name (string) or an inline scene (object)"))
+            }
+            None => return Err(ApiError::invalid("scene: missing: give a scene name, an inline scene, or a snapshot")),
+        };
+        let (width, height) = (req.width.unwrap_or(scene.camera.width), req.height.unwrap_or(scene.camera.height));
+        Ok(Plan {
+            scene_name,
+            scene_dir,
+            scene,
+            technique: req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default())),
+            width,
+            height,
+            seed: req.seed,
+            tick_hz: req.tick_hz,
+            denoise: req.denoise,
+            resume: None,
+            field: "",
+        })
+    }
+
+    /// Checks a plan against the limits, builds its session and starts its worker.
+    fn start(&self, mut plan: Plan, reservation: Reservation) -> Result<SessionView, ApiError> {
+        self.check_plan(&plan)?;
+        plan.scene.set_resolution(plan.width, plan.height);
+        let pixels = u64::from(plan.width) * u64::from(plan.height);
+        let memory_bytes = self.check_memory(&plan, pixels)?;
+        let memory = reservation.memory(memory_bytes, self.config.limits.server_memory)?;
+        let f = plan.field;
+        let mut session = Session::new(plan.scene, &plan.technique, plan.seed, &self.device).map_err(|e| match e {
+            crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
+                ApiError::invalid(format!("{f}technique: {t}"))
+            }
+            crate::engine::EngineError::Technique(t @ TechniqueError::TooLarge { .. }) => {
+                ApiError::too_large(format!("{f}technique.{t}"))
+            }
+            crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("{f}scene: {s}")),
+            other => ApiError::internal(other.to_string()),
+        })?;
+        if let Some(settings) = plan.denoise {
+            session.enable_denoise(settings).map_err(denoise_error)?;
+        }
+        let (progress, playing) = plan.resume.unzip();
+        let first_tick = progress.as_ref().map_or(0, |p| p.tick);
+        if let Some(progress) = progress {
+            session.resume(progress).map_err(|e| ApiError::invalid(format!("snapshot.pending_edits: {e}")))?;
+        }
+        let id = self.new_session_id();
+        let context = WorkerContext {
+            pool: self.pool.clone(),
+            turns: self.turns.clone(),
+            metrics: self.metrics.clone(),
+            max_tick_hz: self.config.limits.max_tick_hz,
+        };
+        let handle = SessionHandle::spawn(&id, session, memory, plan.tick_hz, playing.flatten(), context)
+            .map_err(|e| ApiError::internal(format!("cannot start the session thread: {e}")))?;
+        let entry = Arc::new(SessionEntry {
+            id: id.clone(),
+            scene: plan.scene_name,
+            scene_dir: plan.scene_dir,
+            technique: plan.technique,
+            width: plan.width,
+            height: plan.height,
+            seed: plan.seed,
+            tick_hz: plan.tick_hz,
+            denoise: plan.denoise,
+            first_tick,
+            last_active: AtomicU64::new(self.now_ms()),
+            handle,
+            _reservation: reservation,
+        });
+        self.sessions.write().map_err(|_| ApiError::internal("session table lock poisoned"))?.insert(id, entry.clone());
+        self.metrics.sessions_created.fetch_add(1, Ordering::Relaxed);
+        Ok(view(&entry))
+    }
+
+    /// `NODE.sN-XXXXXXXX`: the node routes it, `N` counts this process's sessions, and the
+    /// salt keeps ids from repeating across restarts of a node.
+    fn new_session_id(&self) -> String {
+        let n = self.next_id.fetch_add(1, Ordering::Relaxed);
+        let salt = std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map(|d| d.as_nanos() as u64)
+            .unwrap_or(0);
+        format!("{}.s{n}-{:08x}", self.config.node, crate::core::rng::mix64(salt ^ n) as u32)
+    }
+
+    /// The resolution, spp, photon paths and tick rate against the limits.
+    fn check_plan(&self, plan: &Plan) -> Result<(), ApiError> {
+        let limits = &self.config.limits;
+        let (f, w, h) = (plan.field, plan.width, plan.height);
+        if w == 0 || h == 0 {
+            return Err(ApiError::invalid(format!("{f}width/height: must be at least 1")));
+        }
+        if w > limits.max_side || h > limits.max_side || u64::from(w) * u64::from(h) > limits.max_pixels {
+            return Err(ApiError::too_large(format!(
+                "{f}width/height: {w}x{h} exceeds the limit ({} per side, {} pixels)",
+                limits.max_side, limits.max_pixels
+            )));
+        }
+        if plan.technique.spp_per_tick() > limits.max_spp_per_tick {
+            return Err(ApiError::too_large(format!(
+                "{f}technique.spp: {} exceeds the limit of {} per tick",
+                plan.technique.spp_per_tick(),
+                limits.max_spp_per_tick
+            )));
+        }
+        if plan.technique.photon_paths() > limits.max_photon_paths {
+            return Err(ApiError::too_large(format!(
+                "{f}technique.paths: {} exceeds the limit of {} photon paths per session",
+                plan.technique.photon_paths(),
+                limits.max_photon_paths
+            )));
+        }
+        match plan.tick_hz {
+            Some(hz) if !(hz.is_finite() && (MIN_TICK_HZ..=limits.max_tick_hz).contains(&hz)) => {
+                Err(ApiError::invalid(format!(
+                    "{f}tick_hz: must lie in [{MIN_TICK_HZ}, {}] ticks per second",
+                    limits.max_tick_hz
+                )))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// Takes a place among `max_sessions` atomically (429 when there is none).
+    fn reserve_session(&self) -> Result<Reservation, ApiError> {
+        let max = self.config.limits.max_sessions;
+        let mut r = self.reserved.lock().map_err(|_| ApiError::internal("reservation lock poisoned"))?;
+        if r.sessions >= max {
+            return Err(ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "too_many_sessions",
+                format!("the server holds its maximum of {max} sessions"),
+            ));
+        }
+        r.sessions += 1;
+        Ok(Reservation { table: self.reserved.clone() })
+    }
+
+    /// The session's estimated resident bytes (technique and film), refused with 413 naming
+    /// the technique's sizing field when over `session_memory`.
+    fn check_memory(&self, plan: &Plan, pixels: u64) -> Result<u64, ApiError> {
+        let (f, limit) = (plan.field, self.config.limits.session_memory);
+        let estimate = plan.technique.resident_estimate(&plan.scene, pixels).map_err(|e| match e {
+            TechniqueError::TooLarge { .. } => ApiError::too_large(format!("{f}technique.{e}")),
+            other => ApiError::invalid(format!("{f}technique: {other}")),
+        })?;
+        let film = pixels * crate::film::Film::BYTES_PER_PIXEL;
+        let denoiser = plan.denoise.map_or(0, |d| d.resident_estimate(pixels));
+        let bytes = estimate.bytes.saturating_add(film).saturating_add(denoiser);
+        if bytes > limit && denoiser > 0 && estimate.bytes.saturating_add(film) <= limit {
+            return Err(ApiError::too_large(format!(
+                "{f}denoise: the session would hold about {} MiB with its denoiser, above the {} MiB a session may hold (--session-memory)",
+                bytes >> 20,
+                limit >> 20
+            )));
+        }
+        if bytes > limit {
+            return Err(ApiError::too_large(format!(
+                "{f}technique.{}: the session would hold about {} MiB, above the {} MiB a session may hold (--session-memory)",
+                estimate.field,
+                bytes >> 20,
+                limit >> 20
+            )));
+        }
+        Ok(bytes)
+    }
+}
