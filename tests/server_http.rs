@@ -152,7 +152,7 @@ async fn bad_inputs_get_their_4xx_and_harm_nothing() {
     let cases: Vec<BadCase> = vec![
         ("POST", "/v1/sessions".into(), Some("{".into()), 400, "EOF"),
         ("POST", "/v1/sessions".into(), Some("not json".into()), 400, "expected"),
-        ("POST", "/v1/sessions".into(), Some("[]".into()), 422, "expected struct CreateSession"),
+        ("POST", "/v1/sessions".into(), Some("[]".into()), 422, "scene: missing"),
         ("POST", "/v1/sessions".into(), Some(r#"{"scene": 5}"#.into()), 422, "scene"),
         ("POST", "/v1/sessions".into(), Some(r#"{"scene": "cornell-box", "colour": 1}"#.into()), 422, "unknown field"),
         ("POST", "/v1/sessions".into(), Some(r#"{"scene": "../../etc/passwd"}"#.into()), 422, "not a scene name"),
