@@ -7,78 +7,12 @@
 //! 16 under every Embree kernel family this CPU has; and it stops the server with SIGTERM,
 //! which must exit 0. A crash anywhere (a signal instead of an exit code) fails the test.
 mod common;
+use common::process::Served;
 use common::ws::{next_frame, next_text, send};
 use serde_json::{json, Value};
-use std::io::{BufRead, BufReader};
-use std::process::{Child, Command, Stdio};
-use std::time::{Duration, Instant};
+use std::process::{Command, Stdio};
 
-const BIN: &str = env!("CARGO_BIN_EXE_relume");
-
-/// A running `relume serve` and the address it printed.
-struct Served {
-    child: Child,
-    addr: String,
-}
-
-impl Served {
-    fn start() -> Served {
-        let mut child = Command::new(BIN)
-            .args(["serve", "--addr", "127.0.0.1:0", "--threads", "2", "--scenes"])
-            .arg(common::scenes_dir())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("relume serve starts");
-        // Stderr is read on its own thread (and drained after, so the server never blocks on a
-        // full pipe); the address must come within a deadline, so a changed line fails the
-        // test instead of hanging it.
-        let stderr = child.stderr.take().expect("stderr");
-        let (tx, rx) = std::sync::mpsc::channel::<String>();
-        std::thread::spawn(move || {
-            for line in BufReader::new(stderr).lines().map_while(Result::ok) {
-                let _ = tx.send(line);
-            }
-        });
-        let deadline = Instant::now() + Duration::from_secs(60);
-        let addr = loop {
-            let left = deadline.saturating_duration_since(Instant::now());
-            let Ok(line) = rx.recv_timeout(left) else {
-                let _ = child.kill();
-                panic!("relume serve printed no 'relume: serving … on http://ADDR/' line within 60 s");
-            };
-            // "relume: serving DIR on http://ADDR/ (Ctrl-C to stop)"
-            if let Some(rest) = line.strip_prefix("relume: serving").and_then(|l| l.split(" on http://").nth(1)) {
-                break rest.split('/').next().unwrap_or_default().to_string();
-            }
-        };
-        Served { child, addr }
-    }
-
-    fn url(&self, path: &str) -> String {
-        format!("http://{}{path}", self.addr)
-    }
-
-    /// Sends SIGTERM and waits (bounded) for the exit status.
-    fn terminate(mut self) -> std::process::ExitStatus {
-        let pid = self.child.id().to_string();
-        let killed = Command::new("kill").args(["-TERM", &pid]).status().expect("kill runs");
-        assert!(killed.success());
-        let deadline = Instant::now() + Duration::from_secs(60);
-        loop {
-            if let Some(status) = self.child.try_wait().expect("wait") {
-                return status;
-            }
-            assert!(Instant::now() < deadline, "relume serve did not exit within 60 s of SIGTERM");
-            std::thread::sleep(Duration::from_millis(50));
-        }
-    }
-}
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-    }
-}
+use common::process::BIN;
 
 async fn drive_session(http: &reqwest::Client, served: &Served, technique: Value) {
     let label = technique["id"].as_str().unwrap_or("?").to_string();
@@ -119,7 +53,7 @@ async fn drive_session(http: &reqwest::Client, served: &Served, technique: Value
 
 #[test]
 fn the_release_binary_serves_every_technique_and_stops_on_sigterm() {
-    let served = Served::start();
+    let served = Served::start(&[]);
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
     runtime.block_on(async {
         let http = reqwest::Client::new();
