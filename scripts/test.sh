@@ -6,6 +6,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh scripts/packages.txt scripts/test-packages.txt
+scripts/pytools.sh
 export PATH="$HOME/.cargo/bin:$PATH"
 cargo build --release --locked
 # Which of Embree's kernel families this CPU runs, and which it skips.
