@@ -56,7 +56,7 @@ fn the_manifests_validate_against_the_kubernetes_schemas() {
         assert!(text.contains(from));
         let broken = std::env::temp_dir().join(format!("relume-broken-{}.yaml", std::process::id()));
         std::fs::write(&broken, text.replacen(from, to, 1)).unwrap();
-        let (ok, out) = validate(&[broken.clone()], "1.30.0");
+        let (ok, out) = validate(std::slice::from_ref(&broken), "1.30.0");
         std::fs::remove_file(&broken).unwrap();
         assert!(!ok, "a manifest with {to} passed:\n{out}");
     }
