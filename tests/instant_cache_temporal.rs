@@ -111,13 +111,50 @@ fn a_static_scene_settles_to_no_work() {
         let mut s = Session::new(room(HOVERING), &temporal(Reevaluation::Immediate), 5, &device).expect("session");
         let first = stats(&s.tick().unwrap());
         assert!(first.records_created > 0 && first.visibility_rays > 0);
+        assert_eq!(first.samples_interpolated, 24 * 24, "{first:?}");
         for tick in 1..6 {
             let st = stats(&s.tick().unwrap());
             assert_eq!(st.records_refreshed, 0, "tick {tick}: {st:?}");
             assert_eq!((st.records_created, st.visibility_rays), (0, 0), "tick {tick}: {st:?}");
             assert_eq!(st.vpls_invalidated + st.vpls_reweighted, 0, "tick {tick}: the VPLs changed: {st:?}");
-            assert_eq!(st.records, first.records, "tick {tick}");
+            // Nor are VPLs shot again, nor any sample looked up: each keeps its irradiance.
+            assert_eq!(st.vpl_rays, 0, "tick {tick}: VPLs were shot again: {st:?}");
+            assert_eq!((st.samples_interpolated, st.samples_reused), (0, 24 * 24), "tick {tick}: {st:?}");
         }
+        // A change brings the lookups back, for every sample.
+        s.queue_edits(vec![move_slab([0.0, 0.6, 0.8])]).unwrap();
+        let moved = stats(&s.tick().unwrap());
+        assert_eq!((moved.samples_interpolated, moved.samples_reused), (24 * 24, 0), "{moved:?}");
+        assert!(moved.vpl_rays > 0, "{moved:?}");
+    });
+}
+
+#[test]
+fn still_ticks_keep_the_records_they_use() {
+    // Property: a still tick looks nothing up, but the records its samples use must stay
+    // marked used, or they would age out (`max_age` = 16) and a camera that leaves and comes
+    // back after 20 still ticks would find no record and make them anew. The camera move is
+    // the check's own control: while away, the samples interpolate again.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    let camera = |x: f32| -> Edit {
+        serde_json::from_value(json!({"target": "camera", "position": [x, 0.3, -2.5], "look_at": [x, 0.3, 2.0]}))
+            .unwrap()
+    };
+    pool.install(|| {
+        let mut s = Session::new(room(HOVERING), &temporal(Reevaluation::Immediate), 5, &device).expect("session");
+        let first = stats(&s.tick().unwrap());
+        for _ in 0..20 {
+            s.tick().unwrap();
+        }
+        s.queue_edits(vec![camera(0.05)]).unwrap();
+        let away = stats(&s.tick().unwrap());
+        assert_eq!(away.samples_interpolated, 24 * 24, "{away:?}");
+        s.queue_edits(vec![camera(0.0)]).unwrap();
+        let back = stats(&s.tick().unwrap());
+        assert_eq!(back.records_created, 0, "records aged out during the still ticks: {back:?}");
+        assert!(back.records >= first.records, "{back:?} vs {first:?}");
+        assert_exact("back", &back);
     });
 }
 

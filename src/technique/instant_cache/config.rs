@@ -39,7 +39,9 @@ pub struct InstantCacheConfig {
     pub interleave: u32,
     pub caching_radius: f32,
     pub clamp_distance: f32,
-    pub admitted_truncation: f32,
+    /// Bounces a VPL path may take; `None`: until Russian roulette ends it (unbiased). A cap
+    /// drops the light of longer paths (about ρ_S^n of the indirect light).
+    pub max_bounces: Option<u32>,
     pub spp: u32,
     pub reevaluation: Reevaluation,
     /// `temporal`: records no pixel used for this many ticks are dropped.
@@ -57,7 +59,7 @@ impl Default for InstantCacheConfig {
             interleave: 4,
             caching_radius: 0.05,
             clamp_distance: 0.01,
-            admitted_truncation: 0.01,
+            max_bounces: None,
             spp: 1,
             reevaluation: Reevaluation::Immediate,
             max_age: 16,
@@ -72,11 +74,17 @@ pub const MAX_VPLS: u32 = 65_536;
 impl InstantCacheConfig {
     /// Resident memory at `pixels` pixels (`budget.rs`): the VPLs and the cache records, at
     /// most one per camera sample of a tick, each holding 4 bytes per VPL; `audit` holds a
-    /// second cache while it recomputes.
+    /// second cache while it recomputes; `temporal` keeps each sample's last hit and result.
     pub fn resident_estimate(&self, pixels: u64) -> Result<MemoryEstimate, TechniqueError> {
         let vpls = u64::from(self.vpls);
-        let records = pixels.saturating_mul(u64::from(self.spp)) * if self.audit { 2 } else { 1 };
-        product_sum("vpls", &[(vpls, size::<Vpl>()), (records, size::<Record>() + 4 * vpls)])
+        let samples = pixels.saturating_mul(u64::from(self.spp));
+        let records = samples * if self.audit { 2 } else { 1 };
+        // `temporal` keeps each sample's last hit and irradiance for its still check.
+        let last = if self.mode == CacheMode::Temporal { samples } else { 0 };
+        product_sum(
+            "vpls",
+            &[(vpls, size::<Vpl>()), (records, size::<Record>() + 4 * vpls), (last, super::LAST_BYTES_PER_SAMPLE)],
+        )
     }
 
     pub fn validate(&self) -> Result<(), TechniqueError> {
@@ -95,8 +103,8 @@ impl InstantCacheConfig {
         if !(self.clamp_distance >= 0.0 && self.clamp_distance <= 1.0) {
             return bad("clamp_distance", "must lie in [0, 1] (a fraction of the scene's diagonal)");
         }
-        if !(self.admitted_truncation > 0.0 && self.admitted_truncation < 1.0) {
-            return bad("admitted_truncation", "must lie in (0, 1)");
+        if self.max_bounces.is_some_and(|n| n == 0 || n > super::vpl::MAX_VPL_BOUNCES) {
+            return bad("max_bounces", &format!("must lie in 1..={} (or be absent)", super::vpl::MAX_VPL_BOUNCES));
         }
         if self.spp == 0 || self.spp > crate::technique::path::MAX_SPP {
             return bad("spp", &format!("must lie in 1..={}", crate::technique::path::MAX_SPP));
@@ -112,7 +120,11 @@ impl InstantCacheConfig {
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct InstantCacheStats {
     pub vpls: u64,
+    /// Photon paths the VPLs come from (their light is divided among these).
     pub vpl_paths: u64,
+    /// The VPL cap (4 × `vpls`) stopped the shooting early; the light was divided among the
+    /// paths completed before it.
+    pub vpl_cap_reached: bool,
     pub vpl_rays: u64,
     /// `temporal`: this tick's VPLs against last tick's, by key (cases 1–2).
     pub vpls_reused: u64,
@@ -123,6 +135,11 @@ pub struct InstantCacheStats {
     pub records: u64,
     pub records_created: u64,
     pub records_reused: u64,
+    /// Camera samples that looked up and interpolated the cache this tick.
+    pub samples_interpolated: u64,
+    /// `temporal`: camera samples that kept their last tick's irradiance (a still tick: same
+    /// hit, no change in the scene), without a lookup.
+    pub samples_reused: u64,
     /// `temporal`: records re-evaluated, and by case those with a ray retraced or a
     /// contribution changed (`vpl`: cases 1–2, a VPL moved, appeared or changed intensity).
     pub records_refreshed: u64,

@@ -3,7 +3,11 @@
 //!
 //! Path i draws dimension d of its Halton point i + 1: 0 picks the light (by power), 1–2 the
 //! point, 3–4 the direction, then 4 per bounce (2 for the BSDF direction, 1 for the lobe,
-//! 1 for Russian roulette). When nothing changes the VPLs are the same every tick. A VPL's `key`
+//! 1 for Russian roulette) for the first [`HALTON_BOUNCES`] bounces; later bounces draw from a
+//! generator keyed by (path, bounce). Paths end by Russian roulette only, which is unbiased;
+//! [`MAX_VPL_BOUNCES`] is a guard that drops at most ρ^64 of a path's light (6·10⁻⁷ at
+//! ρ = 0.8), unless the configuration asks for shorter paths. When nothing changes the VPLs are
+//! the same every tick. A VPL's `key`
 //! (path, bounce) stays the same until what it depends on changes, so visibility rays are
 //! matched across ticks by key. A VPL's `intensity` is Φ·ρ/π, the radiant intensity per unit
 //! cosine of the flux Φ it reflects diffusely; Φ is the light's power over the paths shot.
@@ -18,8 +22,22 @@ const PRIMES: [u32; 48] = [
     113, 127, 131, 137, 139, 149, 151, 157, 163, 167, 173, 179, 181, 191, 193, 197, 199, 211, 223,
 ];
 
-/// Bounces a VPL path may take (the Halton dimensions run out after that).
-pub const MAX_VPL_BOUNCES: u32 = ((PRIMES.len() - 5) / 4) as u32;
+/// Bounces whose samples come from the Halton sequence: its dimensions run out after them.
+pub const HALTON_BOUNCES: usize = (PRIMES.len() - 5) / 4;
+
+/// The longest VPL path (a guard: roulette ends paths long before), and the stride of keys.
+pub const MAX_VPL_BOUNCES: u32 = 64;
+
+/// The four samples of bounce `bounce` of path `index`: BSDF direction (2), lobe, roulette.
+fn bounce_samples(index: u64, bounce: usize) -> [f32; 4] {
+    if bounce < HALTON_BOUNCES {
+        let d = 5 + 4 * bounce;
+        [halton(index, d), halton(index, d + 1), halton(index, d + 2), halton(index, d + 3)]
+    } else {
+        let mut rng = crate::core::Rng::new(index, bounce as u64);
+        [rng.next_f32(), rng.next_f32(), rng.next_f32(), rng.next_f32()]
+    }
+}
 
 /// A digit permutation per Halton dimension, fixed (seeded) and keeping 0 in place so the
 /// infinitely many leading zero digits add nothing.
@@ -71,57 +89,87 @@ pub struct Vpl {
     pub key: u32,
 }
 
-/// Shoots `paths` photon paths (Halton points 1..=paths) and returns their VPLs (at most
-/// `max_vpls`) and the rays traced. The path count, not the VPL count, is fixed: stopping when a
-/// VPL budget is reached would divide by a random path count, and the estimate would be biased
-/// upwards (measured: +110% at 64 VPLs in the furnace).
-pub fn shoot(scene: &Scene, accel: &SceneAccel, paths: u64, max_vpls: usize, max_bounces: u32) -> (Vec<Vpl>, u64) {
-    let mut vpls: Vec<Vpl> = Vec::new();
-    let mut rays = 0u64;
-    let Some(select) = &scene.light_selection else { return (vpls, 0) };
-    let max_bounces = max_bounces.min(MAX_VPL_BOUNCES);
-    'paths: for index in 1..=paths {
-        let u = |d: usize| halton(index, d);
-        let (light, pmf, _) = select.sample(u(0));
-        let Some((origin, dir, weight)) =
-            scene.lights[light].geometry.sample_emission(Vec2::new(u(1), u(2)), Vec2::new(u(3), u(4)))
-        else {
-            continue;
-        };
-        let mut power = weight / pmf;
-        let mut ray = Ray::new(origin, dir);
-        for bounce in 0..max_bounces as usize {
-            rays += 1;
-            let Some(hit) = accel.scene().intersect1(&ray) else { break };
-            let Some((SurfaceId::Object(object), prim)) = accel.resolve(&hit) else { break };
-            let sp = scene.surface_point(SurfaceId::Object(object), prim, hit.u, hit.v);
-            let material = &scene.materials[scene.objects[object as usize].material as usize];
-            let wo = -ray.dir;
-            if !material.is_specular() {
-                if vpls.len() == max_vpls {
-                    break 'paths;
-                }
-                let facing = if sp.n.dot(wo) >= 0.0 { sp.n } else { -sp.n };
-                let intensity = power * material.diffuse_reflectance() * FRAC_1_PI;
-                let key = (index - 1) as u32 * MAX_VPL_BOUNCES + bounce as u32;
-                vpls.push(Vpl { position: sp.p, normal: facing, intensity, object, key });
-            }
-            let d = 5 + 4 * bounce;
-            let Some(bs) = material.sample(sp.n, wo, Vec2::new(u(d), u(d + 1)), u(d + 2)) else { break };
-            let q = bs.weight.max_component().min(1.0);
-            if q <= 0.0 || u(d + 3) >= q {
-                break;
-            }
-            power = power * bs.weight / q;
-            let side = if sp.n.dot(bs.wi) >= 0.0 { sp.n } else { -sp.n };
-            ray = Ray::new(offset_ray_origin(sp.p, side), bs.wi);
+/// What [`shoot`] made.
+#[derive(Debug, Default)]
+pub struct Shot {
+    pub vpls: Vec<Vpl>,
+    pub rays: u64,
+    /// The paths the VPLs come from, and the light is divided among.
+    pub paths: u64,
+    /// The VPL cap stopped shooting before every path asked for was shot.
+    pub capped: bool,
+}
+
+/// Shoots `paths` photon paths (Halton points 1..=paths) of at most `max_bounces` bounces and
+/// returns their VPLs. The path count, not the VPL count, is fixed: stopping when a VPL budget
+/// is reached would divide by a random path count, and the estimate would be biased upwards
+/// (measured: +110% at 64 VPLs in the furnace). `max_vpls` is only a memory guard, far above
+/// the expected count: if it is reached, the path in flight is dropped and the light is divided
+/// among the paths completed before it (a shorter Halton prefix), never among paths not shot.
+pub fn shoot(scene: &Scene, accel: &SceneAccel, paths: u64, max_vpls: usize, max_bounces: u32) -> Shot {
+    let mut shot = Shot { paths, ..Shot::default() };
+    let Some(select) = &scene.light_selection else { return shot };
+    let max_bounces = max_bounces.min(MAX_VPL_BOUNCES) as usize;
+    // One whole path always fits.
+    let max_vpls = max_vpls.max(max_bounces);
+    for index in 1..=paths {
+        let kept = shot.vpls.len();
+        shoot_path(scene, accel, select, index, max_bounces, &mut shot);
+        if shot.vpls.len() > max_vpls {
+            shot.vpls.truncate(kept);
+            shot.paths = index - 1;
+            shot.capped = true;
+            break;
         }
     }
-    let scale = 1.0 / paths.max(1) as f32;
-    for v in &mut vpls {
+    let scale = 1.0 / shot.paths.max(1) as f32;
+    for v in &mut shot.vpls {
         v.intensity *= scale;
     }
-    (vpls, rays)
+    shot
+}
+
+/// Follows path `index`, leaving a VPL at every diffuse hit.
+fn shoot_path(
+    scene: &Scene,
+    accel: &SceneAccel,
+    select: &crate::core::sampling::DiscreteDistribution,
+    index: u64,
+    max_bounces: usize,
+    shot: &mut Shot,
+) {
+    let u = |d: usize| halton(index, d);
+    let (light, pmf, _) = select.sample(u(0));
+    let Some((origin, dir, weight)) =
+        scene.lights[light].geometry.sample_emission(Vec2::new(u(1), u(2)), Vec2::new(u(3), u(4)))
+    else {
+        return;
+    };
+    let mut power = weight / pmf;
+    let mut ray = Ray::new(origin, dir);
+    for bounce in 0..max_bounces {
+        shot.rays += 1;
+        let Some(hit) = accel.scene().intersect1(&ray) else { break };
+        let Some((SurfaceId::Object(object), prim)) = accel.resolve(&hit) else { break };
+        let sp = scene.surface_point(SurfaceId::Object(object), prim, hit.u, hit.v);
+        let material = &scene.materials[scene.objects[object as usize].material as usize];
+        let wo = -ray.dir;
+        if !material.is_specular() {
+            let facing = if sp.n.dot(wo) >= 0.0 { sp.n } else { -sp.n };
+            let intensity = power * material.diffuse_reflectance() * FRAC_1_PI;
+            let key = (index - 1) as u32 * MAX_VPL_BOUNCES + bounce as u32;
+            shot.vpls.push(Vpl { position: sp.p, normal: facing, intensity, object, key });
+        }
+        let [d0, d1, lobe, roulette] = bounce_samples(index, bounce);
+        let Some(bs) = material.sample(sp.n, wo, Vec2::new(d0, d1), lobe) else { break };
+        let q = bs.weight.max_component().min(1.0);
+        if q <= 0.0 || roulette >= q {
+            break;
+        }
+        power = power * bs.weight / q;
+        let side = if sp.n.dot(bs.wi) >= 0.0 { sp.n } else { -sp.n };
+        ray = Ray::new(offset_ray_origin(sp.p, side), bs.wi);
+    }
 }
 
 /// The visibility ray from `x` (unit normal `n` on the side it looks from) to `vpl`: both ends
