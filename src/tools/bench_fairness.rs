@@ -137,11 +137,7 @@ async fn steady(client: &Client, id: &str, hz: f64, duration: Duration) -> Resul
 
 /// Both phases against the server at `base`.
 async fn measure(args: &FairnessArgs, base: String) -> Result<FairnessReport> {
-    let mut headers = reqwest::header::HeaderMap::new();
-    if let Some(t) = &args.token {
-        headers.insert(reqwest::header::AUTHORIZATION, format!("Bearer {t}").parse().context("token")?);
-    }
-    let http = reqwest::Client::builder().default_headers(headers).timeout(Duration::from_secs(120)).build()?;
+    let http = super::http_client(args.token.as_deref(), Duration::from_secs(120))?;
     let client = Arc::new(Client { http, base });
     let config = serde_json::to_value(technique(&args.technique)?)?;
     let (quiet, noisy) = (client.create(args, &config).await?, client.create(args, &config).await?);

@@ -115,14 +115,7 @@ pub async fn migrate(args: &MigrateArgs) -> Result<Vec<Moved>> {
     if !args.all && args.session.is_empty() {
         return Err(UsageError("give --all or at least one --session ID".into()).into());
     }
-    let mut headers = reqwest::header::HeaderMap::new();
-    if let Some(t) = &args.token {
-        headers.insert(
-            reqwest::header::AUTHORIZATION,
-            format!("Bearer {t}").parse().context("token is not a valid header value")?,
-        );
-    }
-    let http = reqwest::Client::builder().default_headers(headers).timeout(args.timeout).build()?;
+    let http = super::http_client(args.token.as_deref(), args.timeout)?;
     let nodes = Nodes {
         http,
         from: args.from.trim_end_matches('/').to_string(),

@@ -46,6 +46,18 @@ impl SceneArgs {
     }
 }
 
+/// An HTTP client for a relume server: every request carries `Authorization: Bearer TOKEN`
+/// when a token is given, and gives up after `timeout`.
+pub fn http_client(token: Option<&str>, timeout: std::time::Duration) -> anyhow::Result<reqwest::Client> {
+    use anyhow::Context;
+    let mut headers = reqwest::header::HeaderMap::new();
+    if let Some(t) = token {
+        let value = format!("Bearer {t}").parse().context("the token is not a valid header value")?;
+        headers.insert(reqwest::header::AUTHORIZATION, value);
+    }
+    Ok(reqwest::Client::builder().default_headers(headers).timeout(timeout).build()?)
+}
+
 /// The settings for `--denoise[=QUALITY]` (`None` when the flag is absent; aux images on).
 pub fn denoise_settings(flag: Option<&str>) -> Result<Option<crate::film::DenoiseSettings>, UsageError> {
     use crate::film::{DenoiseQuality, DenoiseSettings};

@@ -186,14 +186,7 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
     let frames: FrameFormat = serde_json::from_value(serde_json::Value::String(args.frames.clone()))
         .map_err(|_| UsageError("--frames: png, jpg, exr or none".into()))?;
     let base = args.url.trim_end_matches('/').to_string();
-    let mut headers = reqwest::header::HeaderMap::new();
-    if let Some(t) = &args.token {
-        headers.insert(
-            reqwest::header::AUTHORIZATION,
-            format!("Bearer {t}").parse().context("token is not a valid header value")?,
-        );
-    }
-    let http = reqwest::Client::builder().default_headers(headers).timeout(args.timeout).build()?;
+    let http = super::http_client(args.token.as_deref(), args.timeout)?;
     let (rss_start, encode_start, tick_start) = server_figures(&http, &base).await;
 
     // Create the sessions first, so every stream starts together.
