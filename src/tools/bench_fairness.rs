@@ -13,7 +13,7 @@
 use super::load::{percentile, technique};
 use super::UsageError;
 use crate::server::{self, AppState, Limits, ServerConfig};
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
