@@ -210,8 +210,6 @@ impl InstantCache {
         }
         self.last.resize_with(self.config.spp as usize, LastPass::default);
         self.last[k] = LastPass { hits: shaded.iter().map(hit_key).collect(), indirect: indirect.to_vec() };
-        let bytes = self.last.iter().map(|l| l.hits.len() * LAST_BYTES_PER_SAMPLE as usize).sum::<usize>();
-        self.pending.memory.set("last_tick", bytes as u64);
     }
 
     /// `temporal`, at the start of a tick: ages the cache and applies what changed since the
@@ -508,6 +506,10 @@ impl Technique for InstantCache {
             );
             self.passes += 1;
             film.passes += 1;
+        }
+        if self.config.mode == CacheMode::Temporal {
+            let samples: usize = self.last.iter().map(|l| l.hits.len()).sum();
+            self.pending.memory.set("last_tick", samples as u64 * LAST_BYTES_PER_SAMPLE);
         }
         let mut stats = std::mem::take(&mut self.pending);
         stats.render_ms = start.elapsed().as_secs_f64() * 1e3;
