@@ -208,6 +208,7 @@ const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/sessions/{id}/stats"),
     ("DELETE", "/v1/sessions/{id}"),
     ("GET", "/v1/sessions/{id}/scene"),
+    ("GET", "/v1/sessions/{id}/snapshot"),
     ("POST", "/v1/sessions/nope/edits"),
 ];
 
@@ -228,7 +229,16 @@ fn a_real_server_answers_every_mutated_request_below_500() {
     let mut create = examples("create-session.request.json");
     create["width"] = json!(16);
     create["height"] = json!(16);
-    let seeds = vec![create, examples("edits.request.json"), json!({})];
+    // A restore body, from a real snapshot: the mutations reach its scene, counters, edits and
+    // animation, which are validated like a create's.
+    let snapshot = rt.block_on(async {
+        let id = s.session(json!({"scene": "bunnies-1", "width": 16, "height": 16})).await;
+        let snap: Value =
+            s.http.get(s.url(&format!("/v1/sessions/{id}/snapshot"))).send().await.unwrap().json().await.unwrap();
+        s.http.delete(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap();
+        snap
+    });
+    let seeds = vec![create, examples("edits.request.json"), json!({}), json!({ "snapshot": snapshot })];
     let body = prop_oneof![4 => mutated(seeds).prop_map(|v| v.to_string().into_bytes()), 1 => prop::collection::vec(any::<u8>(), 0..64)];
     let strategy = (0..ROUTES.len(), body, any::<bool>());
     runner(60)
