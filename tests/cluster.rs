@@ -111,6 +111,8 @@ fn two_nodes_behind_haproxy_route_drain_and_migrate() {
             http.get(proxy.url("/healthz")).send().await.is_ok_and(|r| r.status() == 200)
         })
         .await;
+        let metrics = http.get(a.url("/metrics")).send().await.unwrap().text().await.unwrap();
+        assert!(metrics.contains("\nrelume_draining 0\n"), "{metrics}");
         // Creates are balanced; every later request for a session lands on its owner.
         let mut ids = Vec::new();
         for i in 0..SESSIONS {
@@ -150,6 +152,10 @@ fn two_nodes_behind_haproxy_route_drain_and_migrate() {
             http.get(a.url("/healthz")).send().await.is_ok_and(|r| r.status() == 503)
         })
         .await;
+        let metrics = http.get(a.url("/metrics")).send().await.unwrap().text().await.unwrap();
+        assert!(metrics.contains("\nrelume_draining 1\n"), "{metrics}");
+        let reserved = metrics.lines().find_map(|l| l.strip_prefix("relume_session_memory_reserved_bytes "));
+        assert!(reserved.and_then(|b| b.parse::<u64>().ok()).is_some_and(|b| b > 0), "{reserved:?}");
         let r = http.post(a.url("/v1/sessions")).json(&create_body(1)).send().await.unwrap();
         assert_eq!(r.status(), 503);
         assert_eq!(r.headers().get("retry-after").and_then(|v| v.to_str().ok()), Some("1"));

@@ -10,6 +10,13 @@ use std::sync::Mutex;
 /// Upper bounds of the tick latency histogram, seconds.
 const TICK_BUCKETS: [f64; 12] = [0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 2.5, 5.0, 10.0, 30.0];
 
+/// The server's state as `/metrics` reports it besides the counters.
+pub struct Gauges {
+    pub sessions: usize,
+    pub reserved_bytes: u64,
+    pub draining: bool,
+}
+
 #[derive(Default)]
 pub struct Metrics {
     pub sessions_created: AtomicU64,
@@ -71,7 +78,8 @@ impl Metrics {
         pages * 4096
     }
 
-    pub fn render(&self, sessions: usize) -> String {
+    pub fn render(&self, now: &Gauges) -> String {
+        let sessions = now.sessions;
         let mut out = String::new();
         let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
         let mut counter = |name: &str, help: &str, value: u64| {
@@ -117,6 +125,16 @@ impl Metrics {
         let _ = writeln!(
             out,
             "# HELP relume_sessions Sessions open.\n# TYPE relume_sessions gauge\nrelume_sessions {sessions}"
+        );
+        let _ = writeln!(
+            out,
+            "# HELP relume_session_memory_reserved_bytes The sessions' estimated memory, counted against --server-memory.\n# TYPE relume_session_memory_reserved_bytes gauge\nrelume_session_memory_reserved_bytes {}",
+            now.reserved_bytes
+        );
+        let _ = writeln!(
+            out,
+            "# HELP relume_draining 1 once SIGTERM has set the node draining (new sessions refused), else 0.\n# TYPE relume_draining gauge\nrelume_draining {}",
+            u8::from(now.draining)
         );
         let _ = writeln!(
             out,

@@ -75,7 +75,12 @@ pub async fn healthz(State(s): State<Shared>) -> Result<&'static str, ApiError> 
 }
 
 pub async fn metrics(State(s): State<Shared>) -> Response {
-    let body = s.metrics.render(s.session_count());
+    let now = super::metrics::Gauges {
+        sessions: s.session_count(),
+        reserved_bytes: s.reserved_bytes(),
+        draining: s.is_draining(),
+    };
+    let body = s.metrics.render(&now);
     ([(header::CONTENT_TYPE, "text/plain; version=0.0.4")], body).into_response()
 }
 
