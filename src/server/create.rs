@@ -7,10 +7,10 @@
 //! [`Limits`]: super::Limits
 use super::error::ApiError;
 use super::protocol::{CreateSession, PlayingAnimation, SessionView};
-use super::state::{valid_name, view, AppState, Reservation, SessionEntry, MIN_TICK_HZ};
+use super::state::{valid_name, view, AppState, Reservation, SessionEntry, SessionSettings, MIN_TICK_HZ};
 use super::worker::{SessionHandle, WorkerContext};
 use crate::engine::{Progress, Session};
-use crate::film::{DenoiseError, DenoiseSettings};
+use crate::film::DenoiseError;
 use crate::scene::{Scene, SceneError};
 use crate::technique::{path::PathConfig, TechniqueConfig, TechniqueError};
 use axum::http::StatusCode;
@@ -25,12 +25,7 @@ pub(super) struct Plan {
     /// Folder of the scene file, where its animations live (`None` for inline scenes).
     pub scene_dir: Option<PathBuf>,
     pub scene: Scene,
-    pub technique: TechniqueConfig,
-    pub width: u32,
-    pub height: u32,
-    pub seed: u64,
-    pub tick_hz: Option<f32>,
-    pub denoise: Option<DenoiseSettings>,
+    pub settings: SessionSettings,
     /// A restore: where the snapshot's session stood, and what it was playing.
     pub resume: Option<(Progress, Option<PlayingAnimation>)>,
     /// Prefix of the fields errors name: `""`, or `"snapshot."` for a restore.
@@ -108,41 +103,39 @@ impl AppState {
             None => return Err(ApiError::invalid("scene: missing: give a scene name, an inline scene, or a snapshot")),
         };
         let (width, height) = (req.width.unwrap_or(scene.camera.width), req.height.unwrap_or(scene.camera.height));
-        Ok(Plan {
-            scene_name,
-            scene_dir,
-            scene,
+        let settings = SessionSettings {
             technique: req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default())),
             width,
             height,
             seed: req.seed,
             tick_hz: req.tick_hz,
             denoise: req.denoise,
-            resume: None,
-            field: "",
-        })
+        };
+        Ok(Plan { scene_name, scene_dir, scene, settings, resume: None, field: "" })
     }
 
     /// Checks a plan against the limits, builds its session and starts its worker.
     fn start(&self, mut plan: Plan, reservation: Reservation) -> Result<SessionView, ApiError> {
         self.check_plan(&plan)?;
-        plan.scene.set_resolution(plan.width, plan.height);
-        let pixels = u64::from(plan.width) * u64::from(plan.height);
+        plan.scene.set_resolution(plan.settings.width, plan.settings.height);
+        let pixels = u64::from(plan.settings.width) * u64::from(plan.settings.height);
         let memory_bytes = self.check_memory(&plan, pixels)?;
         let memory = reservation.memory(memory_bytes, self.config.limits.server_memory)?;
         let f = plan.field;
-        let mut session = Session::new(plan.scene, &plan.technique, plan.seed, &self.device).map_err(|e| match e {
-            crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
-                ApiError::invalid(format!("{f}technique: {t}"))
-            }
-            crate::engine::EngineError::Technique(t @ TechniqueError::TooLarge { .. }) => {
-                ApiError::too_large(format!("{f}technique.{t}"))
-            }
-            crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("{f}scene: {s}")),
-            other => ApiError::internal(other.to_string()),
-        })?;
-        if let Some(settings) = plan.denoise {
-            session.enable_denoise(settings).map_err(denoise_error)?;
+        let settings = plan.settings;
+        let mut session =
+            Session::new(plan.scene, &settings.technique, settings.seed, &self.device).map_err(|e| match e {
+                crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
+                    ApiError::invalid(format!("{f}technique: {t}"))
+                }
+                crate::engine::EngineError::Technique(t @ TechniqueError::TooLarge { .. }) => {
+                    ApiError::too_large(format!("{f}technique.{t}"))
+                }
+                crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("{f}scene: {s}")),
+                other => ApiError::internal(other.to_string()),
+            })?;
+        if let Some(denoise) = settings.denoise {
+            session.enable_denoise(denoise).map_err(denoise_error)?;
         }
         let (progress, playing) = plan.resume.unzip();
         let first_tick = progress.as_ref().map_or(0, |p| p.tick);
@@ -156,18 +149,13 @@ impl AppState {
             metrics: self.metrics.clone(),
             max_tick_hz: self.config.limits.max_tick_hz,
         };
-        let handle = SessionHandle::spawn(&id, session, memory, plan.tick_hz, playing.flatten(), context)
+        let handle = SessionHandle::spawn(&id, session, memory, settings.tick_hz, playing.flatten(), context)
             .map_err(|e| ApiError::internal(format!("cannot start the session thread: {e}")))?;
         let entry = Arc::new(SessionEntry {
             id: id.clone(),
             scene: plan.scene_name,
             scene_dir: plan.scene_dir,
-            technique: plan.technique,
-            width: plan.width,
-            height: plan.height,
-            seed: plan.seed,
-            tick_hz: plan.tick_hz,
-            denoise: plan.denoise,
+            settings,
             first_tick,
             last_active: AtomicU64::new(self.now_ms()),
             handle,
@@ -192,7 +180,8 @@ impl AppState {
     /// The resolution, spp, photon paths and tick rate against the limits.
     fn check_plan(&self, plan: &Plan) -> Result<(), ApiError> {
         let limits = &self.config.limits;
-        let (f, w, h) = (plan.field, plan.width, plan.height);
+        let (f, settings) = (plan.field, &plan.settings);
+        let (w, h) = (settings.width, settings.height);
         if w == 0 || h == 0 {
             return Err(ApiError::invalid(format!("{f}width/height: must be at least 1")));
         }
@@ -202,21 +191,21 @@ impl AppState {
                 limits.max_side, limits.max_pixels
             )));
         }
-        if plan.technique.spp_per_tick() > limits.max_spp_per_tick {
+        if settings.technique.spp_per_tick() > limits.max_spp_per_tick {
             return Err(ApiError::too_large(format!(
                 "{f}technique.spp: {} exceeds the limit of {} per tick",
-                plan.technique.spp_per_tick(),
+                settings.technique.spp_per_tick(),
                 limits.max_spp_per_tick
             )));
         }
-        if plan.technique.photon_paths() > limits.max_photon_paths {
+        if settings.technique.photon_paths() > limits.max_photon_paths {
             return Err(ApiError::too_large(format!(
                 "{f}technique.paths: {} exceeds the limit of {} photon paths per session",
-                plan.technique.photon_paths(),
+                settings.technique.photon_paths(),
                 limits.max_photon_paths
             )));
         }
-        match plan.tick_hz {
+        match settings.tick_hz {
             Some(hz) if !(hz.is_finite() && (MIN_TICK_HZ..=limits.max_tick_hz).contains(&hz)) => {
                 Err(ApiError::invalid(format!(
                     "{f}tick_hz: must lie in [{MIN_TICK_HZ}, {}] ticks per second",
@@ -246,12 +235,12 @@ impl AppState {
     /// the technique's sizing field when over `session_memory`.
     fn check_memory(&self, plan: &Plan, pixels: u64) -> Result<u64, ApiError> {
         let (f, limit) = (plan.field, self.config.limits.session_memory);
-        let estimate = plan.technique.resident_estimate(&plan.scene, pixels).map_err(|e| match e {
+        let estimate = plan.settings.technique.resident_estimate(&plan.scene, pixels).map_err(|e| match e {
             TechniqueError::TooLarge { .. } => ApiError::too_large(format!("{f}technique.{e}")),
             other => ApiError::invalid(format!("{f}technique: {other}")),
         })?;
         let film = pixels * crate::film::Film::BYTES_PER_PIXEL;
-        let denoiser = plan.denoise.map_or(0, |d| d.resident_estimate(pixels));
+        let denoiser = plan.settings.denoise.map_or(0, |d| d.resident_estimate(pixels));
         let bytes = estimate.bytes.saturating_add(film).saturating_add(denoiser);
         if bytes > limit && denoiser > 0 && estimate.bytes.saturating_add(film) <= limit {
             return Err(ApiError::too_large(format!(

@@ -16,7 +16,7 @@
 use super::create::{scene_error, Plan};
 use super::error::ApiError;
 use super::protocol::{Snapshot, SnapshotFormat};
-use super::state::{valid_name, AppState, SessionEntry};
+use super::state::{valid_name, AppState, SessionEntry, SessionSettings};
 use super::worker::SnapshotParts;
 use crate::engine::Progress;
 use crate::scene::Scene;
@@ -31,10 +31,10 @@ pub fn snapshot_of(entry: &SessionEntry, parts: SnapshotParts) -> Snapshot {
         session: entry.id.clone(),
         scene_name: entry.scene.clone(),
         scene: parts.scene,
-        technique: entry.technique.clone(),
-        seed: entry.seed,
-        tick_hz: entry.tick_hz,
-        denoise: entry.denoise,
+        technique: entry.settings.technique.clone(),
+        seed: entry.settings.seed,
+        tick_hz: entry.settings.tick_hz,
+        denoise: entry.settings.denoise,
         tick: parts.progress.tick,
         edits_accepted: parts.progress.edits_accepted,
         accumulation_id: parts.progress.accumulation_id,
@@ -83,16 +83,19 @@ impl AppState {
             accumulation_id: snapshot.accumulation_id,
             pending: snapshot.pending_edits,
         };
-        Ok(Plan {
-            scene_name,
-            scene_dir,
-            scene,
+        let settings = SessionSettings {
             technique: snapshot.technique,
             width,
             height,
             seed: snapshot.seed,
             tick_hz: snapshot.tick_hz,
             denoise: snapshot.denoise,
+        };
+        Ok(Plan {
+            scene_name,
+            scene_dir,
+            scene,
+            settings,
             resume: Some((progress, snapshot.animation)),
             field: "snapshot.",
         })

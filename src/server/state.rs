@@ -124,18 +124,25 @@ pub struct Access {
     pub origins: Vec<String>,
 }
 
-/// What the server remembers about a session besides its worker.
-pub struct SessionEntry {
-    pub id: String,
-    pub scene: String,
-    /// Folder of the scene file, where its animations live (`None` for inline scenes).
-    pub scene_dir: Option<PathBuf>,
+/// What a session runs with besides its scene: checked against the limits when it is created,
+/// shown in its view and carried by its snapshot.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SessionSettings {
     pub technique: TechniqueConfig,
     pub width: u32,
     pub height: u32,
     pub seed: u64,
     pub tick_hz: Option<f32>,
     pub denoise: Option<DenoiseSettings>,
+}
+
+/// What the server remembers about a session besides its worker.
+pub struct SessionEntry {
+    pub id: String,
+    pub scene: String,
+    /// Folder of the scene file, where its animations live (`None` for inline scenes).
+    pub scene_dir: Option<PathBuf>,
+    pub settings: SessionSettings,
     /// The number of its first tick: 0, or the snapshot's tick for a restored session.
     pub first_tick: u64,
     /// Milliseconds after the server's start of the last request or WebSocket message.
@@ -386,12 +393,12 @@ pub fn view(e: &SessionEntry) -> SessionView {
     SessionView {
         id: e.id.clone(),
         scene: e.scene.clone(),
-        technique: e.technique.clone(),
-        width: e.width,
-        height: e.height,
-        seed: e.seed,
-        tick_hz: e.tick_hz,
-        denoise: e.denoise,
+        technique: e.settings.technique.clone(),
+        width: e.settings.width,
+        height: e.settings.height,
+        seed: e.settings.seed,
+        tick_hz: e.settings.tick_hz,
+        denoise: e.settings.denoise,
         ticks: last_stats.as_ref().map_or(e.first_tick, |s| s.tick + 1),
         state: if failure.is_some() { "failed".into() } else { "running".into() },
         failure,
