@@ -183,3 +183,37 @@ fn moving_an_object_away_and_back_restores_the_cache() {
         assert_eq!(back.audit_digest, settled.audit_digest, "the cache was not restored: {back:?}");
     });
 }
+
+#[test]
+fn a_still_tick_renders_what_a_fresh_lookup_renders() {
+    // Property: a still tick's kept irradiance is what looking the cache up would give. The
+    // twin is the same session restored at tick 1 (`Session::resume`): it builds its cache
+    // afresh at that tick and looks every sample up. The room's only light is a point lamp, so
+    // direct light has no randomness and each pass of a tick is the same image: the still
+    // session's two passes and the twin's one must agree bit for bit. Negative control: the
+    // twin restored with the slab moved by 1 cm (a real change) must differ.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    let config = TechniqueConfig::InstantCache(InstantCacheConfig {
+        mode: CacheMode::Temporal,
+        vpls: 64,
+        ..InstantCacheConfig::default()
+    });
+    pool.install(|| {
+        let mut still = Session::new(room(HOVERING), &config, 5, &device).expect("session");
+        still.tick().unwrap();
+        let progress = still.progress();
+        let kept = still.tick().unwrap();
+        assert_eq!(stats(&kept).samples_reused, 24 * 24, "the tick was not still: {:?}", stats(&kept));
+        let twin = |slab: [f32; 3]| {
+            let mut s = Session::new(room(slab), &config, 5, &device).expect("twin");
+            s.resume(progress.clone()).unwrap();
+            let frame = s.tick().unwrap();
+            assert_eq!((frame.tick, stats(&frame).samples_interpolated), (1, 24 * 24));
+            frame.image
+        };
+        assert_eq!(kept.image.pixels, twin(HOVERING).pixels, "a still tick differs from a fresh lookup");
+        let moved = twin([HOVERING[0] + 0.01, HOVERING[1], HOVERING[2]]);
+        assert_ne!(kept.image.pixels, moved.pixels, "the comparison cannot tell a moved slab");
+    });
+}
