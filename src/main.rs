@@ -3,6 +3,8 @@
 //! - `relume serve [--addr 127.0.0.1:8080] [--scenes DIR] [--token TOKEN] [--max-sessions N] [--threads T]`
 //! - `relume render SCENE.json --technique path --spp N --out FILE.(png|jpg|exr)`
 //! - `relume render SCENE.json --anim NAME.anim.json --frames N --out DIR/`
+//! - `relume render SCENE.glb [--camera NAME] [--scale S] [--anim NAME] …` (glTF 2.0 scenes)
+//! - `relume export SCENE.json --out SCENE.glb [--anim NAME.anim.json]…`
 //! - `relume bench rays SCENE.json [--json FILE]`
 //! - `relume bench reuse SCENE.json --anim NAME.anim.json --frames F [--paths N[,N2…]] [--json FILE]`
 //! - `relume bench icache SCENE.json --anim NAME.anim.json --frames F [--vpls N] [--audit] [--json FILE]`
@@ -15,7 +17,8 @@
 //! Exit codes: 0 success, 1 runtime failure, 2 bad arguments or input.
 use clap::{Parser, Subcommand};
 use relume::tools::{
-    bench, bench_error, bench_fairness, bench_icache, bench_particles, bench_reuse, load, migrate, render, serve,
+    bench, bench_error, bench_fairness, bench_icache, bench_particles, bench_reuse, export, load, migrate, render,
+    serve,
 };
 use std::process::ExitCode;
 
@@ -40,6 +43,8 @@ enum Command {
     Load(load::LoadArgs),
     /// Move sessions from one node to another: snapshot, restore, delete.
     Migrate(migrate::MigrateArgs),
+    /// Write a scene and its animations as binary glTF 2.0 (.glb).
+    Export(export::ExportArgs),
     /// Benchmarks.
     Bench {
         #[command(subcommand)]
@@ -76,6 +81,7 @@ fn main() -> ExitCode {
         Command::Render(args) => render::run(args),
         Command::Load(args) => load::run(args),
         Command::Migrate(args) => migrate::run(args),
+        Command::Export(args) => export::run(args),
         Command::Bench { which: BenchCommand::Rays(args) } => bench::rays(args),
         Command::Bench { which: BenchCommand::Reuse(args) } => bench_reuse::run(args),
         Command::Bench { which: BenchCommand::Icache(args) } => bench_icache::run(args),

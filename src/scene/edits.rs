@@ -228,6 +228,15 @@ fn validate_coalesced(scene: &Scene, edits: &[(usize, Edit)]) -> Result<(), Scen
                             return Err(err(i, ".emitter.segments", "a disc light's tessellation cannot change"));
                         }
                     }
+                    if let (
+                        EmitterDesc::Mesh { positions: a, indices: ai, .. },
+                        EmitterDesc::Mesh { positions: b, indices: bi, .. },
+                    ) = (em, current)
+                    {
+                        if a != b || ai != bi {
+                            return Err(err(i, ".emitter.positions", "a mesh light's triangles cannot change"));
+                        }
+                    }
                 }
             }
             Edit::Camera { .. } => {

@@ -53,16 +53,26 @@ pub fn emission_rescale(old: &EmitterDesc, new: &EmitterDesc) -> Option<Rgb> {
         {
             (a, b)
         }
+        (
+            EmitterDesc::Mesh { radiance: a, positions: p, indices: i },
+            EmitterDesc::Mesh { radiance: b, positions: p2, indices: i2 },
+        ) if p == p2 && i == i2 => (a, b),
         _ => return None,
     };
     (a.min_component() > 0.0).then(|| Rgb::new(b.r / a.r, b.g / a.g, b.b / a.b))
 }
 
-/// The object-space mesh of a light with a shape (`None` for point and spot lights).
+/// The object-space mesh of a validated light with a shape (`None` for point and spot
+/// lights); a mesh emitter's degenerate triangles are left out, as they emit nothing.
 pub fn emitter_mesh(emitter: &EmitterDesc) -> Option<Mesh> {
     match emitter {
         EmitterDesc::Rect { .. } => Some(Mesh::quad()),
         EmitterDesc::Disc { segments, .. } => Some(Mesh::disc(*segments)),
+        EmitterDesc::Mesh { positions, indices, .. } => {
+            let mut mesh = Mesh::from_inline(positions, indices).ok()?;
+            mesh.drop_degenerate();
+            Some(mesh)
+        }
         EmitterDesc::Point { .. } | EmitterDesc::Spot { .. } => None,
     }
 }
@@ -99,7 +109,10 @@ impl LightGeometry {
                 cos_falloff_start: falloff_start_deg.unwrap_or((cone_deg - 5.0).max(0.0)).to_radians().cos(),
                 cos_falloff_end: cone_deg.to_radians().cos(),
             },
-            (EmitterDesc::Rect { radiance } | EmitterDesc::Disc { radiance, .. }, Some(mesh)) => {
+            (
+                EmitterDesc::Rect { radiance } | EmitterDesc::Disc { radiance, .. } | EmitterDesc::Mesh { radiance, .. },
+                Some(mesh),
+            ) => {
                 let triangles: Vec<[Vec3; 3]> =
                     (0..mesh.triangles.len()).map(|i| mesh.triangle(i).map(|p| xf.transform_point3(p))).collect();
                 let areas: Vec<f32> =
@@ -108,7 +121,10 @@ impl LightGeometry {
                 let by_area = DiscreteDistribution::new(&areas).unwrap_or_default();
                 LightGeometry::Area { radiance: *radiance, triangles, area, by_area }
             }
-            (EmitterDesc::Rect { radiance } | EmitterDesc::Disc { radiance, .. }, None) => LightGeometry::Area {
+            (
+                EmitterDesc::Rect { radiance } | EmitterDesc::Disc { radiance, .. } | EmitterDesc::Mesh { radiance, .. },
+                None,
+            ) => LightGeometry::Area {
                 radiance: *radiance,
                 triangles: Vec::new(),
                 area: 0.0,

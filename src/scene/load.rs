@@ -65,12 +65,14 @@ pub fn count_triangles(desc: &SceneDesc, scene_dir: &Path, root: &Path) -> Resul
             ShapeDesc::Sphere { segments } => Mesh::sphere_triangles(*segments),
             ShapeDesc::Disc { segments } => Mesh::disc_triangles(*segments),
             ShapeDesc::Cylinder { segments } => Mesh::cylinder_triangles(*segments),
+            ShapeDesc::Triangles { indices, .. } => indices.len() as u64,
         };
     }
     for l in &desc.lights {
         total += match &l.emitter {
             EmitterDesc::Rect { .. } => 2,
             EmitterDesc::Disc { segments, .. } => Mesh::disc_triangles(*segments),
+            EmitterDesc::Mesh { indices, .. } => indices.len() as u64,
             EmitterDesc::Point { .. } | EmitterDesc::Spot { .. } => 0,
         };
     }
@@ -225,7 +227,21 @@ pub fn validate_emitter(field: &str, e: &EmitterDesc) -> Result<(), SceneError> 
             check_rgb(&format!("{field}.radiance"), *radiance, None)?;
             check_segments(&format!("{field}.segments"), *segments)
         }
+        EmitterDesc::Mesh { radiance, positions, indices } => {
+            check_rgb(&format!("{field}.radiance"), *radiance, None)?;
+            let mut mesh = inline_mesh(field, positions, indices)?;
+            mesh.drop_degenerate();
+            if mesh.triangles.is_empty() {
+                return Err(invalid(format!("{field}.indices"), "no non-degenerate triangles"));
+            }
+            Ok(())
+        }
     }
+}
+
+/// An inline triangle list as a mesh; errors name the field under `field`.
+pub fn inline_mesh(field: &str, positions: &[[f32; 3]], indices: &[[u32; 3]]) -> Result<Mesh, SceneError> {
+    Mesh::from_inline(positions, indices).map_err(|(at, message)| invalid(format!("{field}.{at}"), message))
 }
 
 fn check_segments(field: &str, s: u32) -> Result<(), SceneError> {
@@ -348,6 +364,7 @@ pub fn validate_and_build_meshes(
                 check_segments(&format!("{shape_field}.segments"), *segments)?;
                 Mesh::cylinder(*segments)
             }
+            ShapeDesc::Triangles { positions, indices } => inline_mesh(&shape_field, positions, indices)?,
         };
         let n = mesh.drop_degenerate();
         if n > 0 {

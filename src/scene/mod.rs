@@ -8,6 +8,7 @@ pub mod accel;
 pub mod animation;
 pub mod camera;
 pub mod edits;
+pub mod gltf;
 pub mod light;
 pub mod load;
 pub mod material;
@@ -25,6 +26,14 @@ use crate::core::sampling::DiscreteDistribution;
 use glam::{Affine3A, Vec3};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+/// A scene file as loaded: the scene, what loading it left out (the load report), and the
+/// animations a glTF file holds, by name.
+pub struct LoadedScene {
+    pub scene: Scene,
+    pub warnings: Vec<String>,
+    pub animations: Vec<(String, animation::Animation)>,
+}
 
 /// Which surface a hit landed on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -103,11 +112,24 @@ impl Scene {
 
     /// [`Scene::load`] refusing, before building anything, a scene over `budget`.
     pub fn load_within(path: &Path, root: &Path, budget: &SceneBudget) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| SceneError::Io { path: path.display().to_string(), message: e.to_string() })?;
-        let desc = load::parse_scene_json(&text)?;
+        let options = gltf::ImportOptions { budget: *budget, ..Default::default() };
+        Scene::load_file(path, root, &options).map(|loaded| loaded.scene)
+    }
+
+    /// Loads a scene file, relume JSON or glTF (`.gltf`, `.glb`, read with `options`), with
+    /// its load report and, for glTF, the animations it holds.
+    pub fn load_file(path: &Path, root: &Path, options: &gltf::ImportOptions) -> Result<LoadedScene, SceneError> {
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_else(|| PathBuf::from("."));
-        Scene::from_desc_within(desc, &dir, root, budget)
+        let (desc, warnings, animations) = if gltf::is_gltf_path(path) {
+            let imported = gltf::import_file(path, root, options)?;
+            (imported.desc, imported.warnings, imported.animations)
+        } else {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| SceneError::Io { path: path.display().to_string(), message: e.to_string() })?;
+            (load::parse_scene_json(&text)?, Vec::new(), Vec::new())
+        };
+        let scene = Scene::from_desc_within(desc, &dir, root, &options.budget)?;
+        Ok(LoadedScene { scene, warnings, animations })
     }
 
     /// Builds a scene from a description whose relative mesh paths resolve against `dir`.

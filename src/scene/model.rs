@@ -11,6 +11,14 @@ use crate::core::Rgb;
 use glam::{Affine3A, Quat, Vec3};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+use std::sync::Arc;
+
+/// Object-space vertex positions of an inline triangle list (what a glTF primitive becomes).
+/// Shared, so cloning a description does not copy its meshes.
+pub type Positions = Arc<[[f32; 3]]>;
+/// Counter-clockwise vertex-index triples into [`Positions`]; the front face is the side
+/// `(p1-p0)×(p2-p0)` points to.
+pub type Indices = Arc<[[u32; 3]]>;
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -139,6 +147,8 @@ pub enum ShapeDesc {
         #[serde(default = "default_segments")]
         segments: u32,
     },
+    /// Triangles given inline (what glTF import makes of a mesh primitive).
+    Triangles { positions: Positions, indices: Indices },
 }
 
 pub fn default_segments() -> u32 {
@@ -179,6 +189,9 @@ pub enum EmitterDesc {
         #[serde(default = "default_segments")]
         segments: u32,
     },
+    /// One-sided triangle mesh, emitting towards each triangle's front face and sampled by
+    /// area (what glTF import makes of an emissive primitive); `radiance` in W/(sr·m²).
+    Mesh { radiance: Rgb, positions: Positions, indices: Indices },
 }
 
 fn default_cone() -> f32 {

@@ -32,6 +32,25 @@ impl Mesh {
         before - self.triangles.len()
     }
 
+    /// A mesh from inline positions and index triples; errors name the first non-finite
+    /// vertex or out-of-range index (`positions[3][1]`, `indices[7][2]`).
+    pub fn from_inline(positions: &[[f32; 3]], indices: &[[u32; 3]]) -> Result<Mesh, (String, String)> {
+        for (i, p) in positions.iter().enumerate() {
+            if let Some(k) = p.iter().position(|v| !v.is_finite()) {
+                return Err((format!("positions[{i}][{k}]"), format!("{} is not a finite number", p[k])));
+            }
+        }
+        for (i, t) in indices.iter().enumerate() {
+            if let Some(k) = t.iter().position(|&v| v as usize >= positions.len()) {
+                return Err((
+                    format!("indices[{i}][{k}]"),
+                    format!("{} is out of range ({} positions)", t[k], positions.len()),
+                ));
+            }
+        }
+        Ok(Mesh { positions: positions.iter().map(|&p| Vec3::from(p)).collect(), triangles: indices.to_vec() })
+    }
+
     pub fn quad() -> Mesh {
         Mesh {
             positions: vec![

@@ -9,7 +9,6 @@
 //!    and for `bdpt`'s eye paths.
 //!
 //! Each measurement repeats until `--seconds` have passed; only rates in one run are compared.
-use super::render::load_scene;
 use super::SceneArgs;
 use crate::core::{offset_ray_origin, sampling, Rng, ShadingFrame};
 use crate::embree::{Device, Ray};
@@ -192,7 +191,7 @@ fn lane_config(technique: &str, width: u32, regeneration: bool) -> TechniqueConf
 }
 
 pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
-    let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
+    let scene = args.target.load_scene()?;
     let threads = args.target.threads();
     let pool = thread_pool(threads)?;
     let device = args.target.device()?;

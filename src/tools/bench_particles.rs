@@ -99,6 +99,9 @@ fn relight_edit(run: &AnimationRun) -> Result<Edit> {
         }
         EmitterDesc::Rect { radiance } => EmitterDesc::Rect { radiance: radiance * dim },
         EmitterDesc::Disc { radiance, segments } => EmitterDesc::Disc { radiance: radiance * dim, segments },
+        EmitterDesc::Mesh { radiance, positions, indices } => {
+            EmitterDesc::Mesh { radiance: radiance * dim, positions, indices }
+        }
     };
     Ok(Edit::Light { name: light.name.clone(), transform: None, emitter: Some(emitter) })
 }

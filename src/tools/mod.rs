@@ -6,6 +6,7 @@ pub mod bench_fairness;
 pub mod bench_icache;
 pub mod bench_particles;
 pub mod bench_reuse;
+pub mod export;
 pub mod load;
 pub mod migrate;
 pub mod render;
@@ -16,8 +17,15 @@ use std::path::{Path, PathBuf};
 /// The scene a command renders, at what size, on how many threads (shared by render and bench).
 #[derive(clap::Args, Debug, Clone)]
 pub struct SceneArgs {
-    /// Scene file (JSON).
+    /// Scene file: relume JSON, or glTF 2.0 (`.gltf`, `.glb`).
     pub scene: PathBuf,
+    /// glTF only: the camera to render through, by camera or node name (default: the first
+    /// perspective camera, or one framing the scene).
+    #[arg(long, value_name = "NAME")]
+    pub camera: Option<String>,
+    /// glTF only: uniform scale for the whole scene (glTF is in metres).
+    #[arg(long, value_name = "FACTOR")]
+    pub scale: Option<f32>,
     /// Image width (default: the scene camera's).
     #[arg(long)]
     pub width: Option<u32>,
@@ -34,6 +42,68 @@ pub struct SceneArgs {
 }
 
 impl SceneArgs {
+    /// Loads the scene file (JSON or glTF) at the requested size, printing the load report's
+    /// warnings on stderr. Mistakes in the file or the flags are usage errors.
+    pub fn load(&self) -> anyhow::Result<crate::scene::LoadedScene> {
+        let path = &self.scene;
+        let gltf = crate::scene::gltf::is_gltf_path(path);
+        if !gltf && (self.camera.is_some() || self.scale.is_some()) {
+            return Err(UsageError("--camera and --scale apply to glTF scenes (.gltf, .glb)".into()).into());
+        }
+        let options = crate::scene::gltf::ImportOptions {
+            camera: self.camera.clone(),
+            scale: self.scale.unwrap_or(1.0),
+            ..Default::default()
+        };
+        let mut loaded = crate::scene::Scene::load_file(path, &scenes_root_for(path), &options)
+            .map_err(|e| UsageError(format!("{}: {e}", path.display())))?;
+        for w in &loaded.warnings {
+            eprintln!("warning: {}: {w}", path.display());
+        }
+        if self.width.is_some() || self.height.is_some() {
+            let scene = &mut loaded.scene;
+            let (w, h) = (self.width.unwrap_or(scene.camera.width), self.height.unwrap_or(scene.camera.height));
+            let max = crate::scene::load::MAX_RESOLUTION;
+            if w == 0 || h == 0 || w > max || h > max {
+                return Err(UsageError(format!("--width/--height must lie in 1..={max}")).into());
+            }
+            scene.set_resolution(w, h);
+        }
+        Ok(loaded)
+    }
+
+    /// The scene alone (see [`SceneArgs::load`]).
+    pub fn load_scene(&self) -> anyhow::Result<crate::scene::Scene> {
+        Ok(self.load()?.scene)
+    }
+
+    /// The animation `anim` names: a `NAME.anim.json` file, or for a glTF scene one of the
+    /// file's animations by name. It is checked against the scene.
+    pub fn load_animation(
+        &self,
+        loaded: &crate::scene::LoadedScene,
+        anim: &Path,
+    ) -> anyhow::Result<crate::scene::animation::Animation> {
+        let in_file = loaded.animations.iter().find(|(n, _)| Path::new(n) == anim).map(|(_, a)| a.clone());
+        let animation = match in_file {
+            Some(a) => a,
+            None if anim.is_file() || loaded.animations.is_empty() => crate::scene::animation::Animation::load(anim)
+                .map_err(|e| UsageError(format!("{}: {e}", anim.display())))?,
+            None => {
+                let names: Vec<&str> = loaded.animations.iter().map(|(n, _)| n.as_str()).collect();
+                return Err(UsageError(format!(
+                    "--anim {}: neither a file nor an animation of {} (it has: {})",
+                    anim.display(),
+                    self.scene.display(),
+                    names.join(", ")
+                ))
+                .into());
+            }
+        };
+        animation.validate(&loaded.scene).map_err(|e| UsageError(format!("{}: {e}", anim.display())))?;
+        Ok(animation)
+    }
+
     pub fn threads(&self) -> usize {
         threads_or_all_cores(self.threads)
     }
@@ -125,7 +195,7 @@ pub fn progress_bar(len: u64, unit: &str) -> anyhow::Result<indicatif::ProgressB
 pub struct AnimationArgs {
     #[command(flatten)]
     pub target: SceneArgs,
-    /// Animation to play (NAME.anim.json).
+    /// Animation to play: NAME.anim.json, or for a glTF scene an animation's name in the file.
     #[arg(long)]
     pub anim: PathBuf,
     #[arg(long, default_value_t = 60)]
@@ -172,10 +242,9 @@ pub struct AnimationRun {
 impl AnimationRun {
     /// Loads and validates the scene and animation (mistakes are usage errors).
     pub fn load(target: &SceneArgs, anim: &Path) -> anyhow::Result<AnimationRun> {
-        let scene = render::load_scene(&target.scene, target.width, target.height)?;
-        let animation = crate::scene::animation::Animation::load(anim)
-            .map_err(|e| UsageError(format!("{}: {e}", anim.display())))?;
-        animation.validate(&scene).map_err(|e| UsageError(format!("{}: {e}", anim.display())))?;
+        let loaded = target.load()?;
+        let animation = target.load_animation(&loaded, anim)?;
+        let scene = loaded.scene;
         let threads = target.threads();
         let pool = crate::engine::thread_pool(threads)?;
         let device = target.device()?;

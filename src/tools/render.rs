@@ -1,10 +1,9 @@
 //! `relume render`: a still image, or an animation rendered through the same session and tick
 //! path the service uses.
-use super::{denoise_settings, scenes_root_for, SceneArgs, UsageError};
+use super::{denoise_settings, SceneArgs, UsageError};
 use crate::embree::Device;
 use crate::engine::{thread_pool, Frame, Session};
 use crate::film::{write_image, ImageFormat};
-use crate::scene::animation::Animation;
 use crate::scene::Scene;
 use crate::technique::TechniqueConfig;
 use anyhow::{Context, Result};
@@ -29,7 +28,8 @@ pub struct RenderArgs {
     /// Exposure in stops for PNG/JPEG output.
     #[arg(long, default_value_t = 0.0)]
     pub exposure: f32,
-    /// Animation to render (NAME.anim.json); --out is then a folder.
+    /// Animation to render: NAME.anim.json, or for a glTF scene an animation's name in the
+    /// file; --out is then a folder.
     #[arg(long)]
     pub anim: Option<PathBuf>,
     /// Frames to render, spread evenly over the animation's duration.
@@ -53,21 +53,6 @@ pub fn technique_config(spec: &str, spp: u32) -> Result<TechniqueConfig> {
     Ok(config)
 }
 
-pub fn load_scene(path: &std::path::Path, width: Option<u32>, height: Option<u32>) -> Result<Scene> {
-    let root = scenes_root_for(path);
-    let mut scene = Scene::load(path, &root).map_err(|e| UsageError(format!("{}: {e}", path.display())))?;
-    if width.is_some() || height.is_some() {
-        let (w, h) = (width.unwrap_or(scene.camera.width), height.unwrap_or(scene.camera.height));
-        if w == 0 || h == 0 || w > crate::scene::load::MAX_RESOLUTION || h > crate::scene::load::MAX_RESOLUTION {
-            return Err(
-                UsageError(format!("--width/--height must lie in 1..={}", crate::scene::load::MAX_RESOLUTION)).into()
-            );
-        }
-        scene.set_resolution(w, h);
-    }
-    Ok(scene)
-}
-
 pub fn run(args: RenderArgs) -> Result<()> {
     if args.spp == 0 {
         return Err(UsageError("--spp must be at least 1".into()).into());
@@ -79,7 +64,10 @@ pub fn run(args: RenderArgs) -> Result<()> {
 }
 
 fn make_session(args: &RenderArgs, spp_per_tick: u32) -> Result<(Session, rayon::ThreadPool, Device)> {
-    let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
+    make_session_of(args, args.target.load_scene()?, spp_per_tick)
+}
+
+fn make_session_of(args: &RenderArgs, scene: Scene, spp_per_tick: u32) -> Result<(Session, rayon::ThreadPool, Device)> {
     let config = technique_config(&args.technique, spp_per_tick)?;
     let threads = args.target.threads();
     let pool = thread_pool(threads)?;
@@ -154,12 +142,12 @@ fn render_animation(args: &RenderArgs, anim_path: &std::path::Path) -> Result<()
     if args.frames == 0 {
         return Err(UsageError("--frames must be at least 1".into()).into());
     }
-    let anim = Animation::load(anim_path).map_err(|e| UsageError(format!("{}: {e}", anim_path.display())))?;
-    let (mut session, pool, _device) = make_session(args, args.spp)?;
+    let loaded = args.target.load()?;
+    let anim = args.target.load_animation(&loaded, anim_path)?;
+    let (mut session, pool, _device) = make_session_of(args, loaded.scene, args.spp)?;
     if let Some(settings) = denoise_settings(args.denoise.as_deref())? {
         session.enable_denoise(settings)?;
     }
-    anim.validate(session.scene()).map_err(|e| UsageError(format!("{}: {e}", anim_path.display())))?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let bar = bar(args.frames as u64, "frames", format!("{} x {} spp", args.technique, args.spp))?;
     let ext = match format {

@@ -13,7 +13,6 @@ mod plots;
 mod reference;
 mod report;
 
-use super::render::load_scene;
 use super::{progress_bar, SceneArgs, UsageError};
 use crate::engine::{thread_pool, Session};
 use crate::film::{DenoiseQuality, DenoiseSettings};
@@ -179,7 +178,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
         return Err(UsageError("--fps must be a positive number".into()).into());
     }
     let configs = bench_configs(&args.techniques, args.denoise.as_deref())?;
-    let scene = load_scene(&args.target.scene, args.target.width, args.target.height)?;
+    let scene = args.target.load_scene()?;
     let scene_file = std::fs::read(&args.target.scene)?;
     let (animation, animation_file) = match &args.anim {
         Some(p) => {
