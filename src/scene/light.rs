@@ -110,7 +110,9 @@ impl LightGeometry {
                 cos_falloff_end: cone_deg.to_radians().cos(),
             },
             (
-                EmitterDesc::Rect { radiance } | EmitterDesc::Disc { radiance, .. } | EmitterDesc::Mesh { radiance, .. },
+                EmitterDesc::Rect { radiance }
+                | EmitterDesc::Disc { radiance, .. }
+                | EmitterDesc::Mesh { radiance, .. },
                 Some(mesh),
             ) => {
                 let triangles: Vec<[Vec3; 3]> =
@@ -122,7 +124,9 @@ impl LightGeometry {
                 LightGeometry::Area { radiance: *radiance, triangles, area, by_area }
             }
             (
-                EmitterDesc::Rect { radiance } | EmitterDesc::Disc { radiance, .. } | EmitterDesc::Mesh { radiance, .. },
+                EmitterDesc::Rect { radiance }
+                | EmitterDesc::Disc { radiance, .. }
+                | EmitterDesc::Mesh { radiance, .. },
                 None,
             ) => LightGeometry::Area {
                 radiance: *radiance,

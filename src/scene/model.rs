@@ -148,7 +148,10 @@ pub enum ShapeDesc {
         segments: u32,
     },
     /// Triangles given inline (what glTF import makes of a mesh primitive).
-    Triangles { positions: Positions, indices: Indices },
+    Triangles {
+        positions: Positions,
+        indices: Indices,
+    },
 }
 
 pub fn default_segments() -> u32 {

@@ -63,10 +63,7 @@ fn read_uri(field: &str, uri: &str, files: Option<&FileContext>, max_bytes: u64)
         return Err(invalid(field, format!("'{uri}': only relative file paths and data: URIs are read")));
     }
     let Some(files) = files else {
-        return Err(invalid(
-            field,
-            format!("'{uri}': an inline glTF cannot refer to files; use a .glb or data: URIs"),
-        ));
+        return Err(invalid(field, format!("'{uri}': an inline glTF cannot refer to files; use a .glb or data: URIs")));
     };
     let decoded = percent_encoding::percent_decode_str(uri).decode_utf8_lossy().into_owned();
     let path = resolve_mesh_path(field, &decoded, files.dir, files.root)?;

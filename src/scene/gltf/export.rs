@@ -169,9 +169,7 @@ fn camera_json(c: &CameraDesc) -> Value {
 impl Writer {
     fn materials(&mut self, scene: &Scene) {
         for m in scene.desc().materials.values() {
-            let pbr = |c: crate::core::Rgb, metallic: f32, roughness: f32| {
-                json!({"baseColorFactor": [c.r, c.g, c.b, 1.0], "metallicFactor": metallic, "roughnessFactor": roughness})
-            };
+            let pbr = |c: crate::core::Rgb, metallic: f32, roughness: f32| json!({"baseColorFactor": [c.r, c.g, c.b, 1.0], "metallicFactor": metallic, "roughnessFactor": roughness});
             let v = match m {
                 Material::Diffuse { reflectance } => json!({"pbrMetallicRoughness": pbr(*reflectance, 0.0, 1.0)}),
                 Material::Mirror { reflectance } => json!({"pbrMetallicRoughness": pbr(*reflectance, 1.0, 0.0)}),
@@ -235,7 +233,9 @@ impl Writer {
                         json!({"type": "spot", "spot": {"innerConeAngle": inner, "outerConeAngle": outer}}),
                     ))
                 }
-                EmitterDesc::Rect { radiance } | EmitterDesc::Disc { radiance, .. } | EmitterDesc::Mesh { radiance, .. } => {
+                EmitterDesc::Rect { radiance }
+                | EmitterDesc::Disc { radiance, .. }
+                | EmitterDesc::Mesh { radiance, .. } => {
                     let mesh = built.mesh.as_deref().ok_or_else(|| invalid(format!("lights[{i}]"), "has no mesh"))?;
                     let material = self.emissive_material(&l.name, *radiance);
                     let value = self.bin.mesh(mesh, material);
@@ -319,7 +319,14 @@ impl Writer {
                         .map(|k| CameraDesc { position: k.position, look_at: k.look_at, ..scene.desc().camera.clone() })
                         .collect();
                     let node = self.camera_node;
-                    channel(&mut self.bin, node, "translation", input, cams.iter().flat_map(|c| c.position).collect(), 3);
+                    channel(
+                        &mut self.bin,
+                        node,
+                        "translation",
+                        input,
+                        cams.iter().flat_map(|c| c.position).collect(),
+                        3,
+                    );
                     let rotations = cams.iter().flat_map(|c| camera_rotation(c).to_array()).collect();
                     channel(&mut self.bin, node, "rotation", input, rotations, 4);
                     continue;
@@ -329,9 +336,18 @@ impl Writer {
             let times = increasing(keys.iter().map(|k| k.time));
             let input = self.bin.floats(&times, 1, "SCALAR", None);
             let turn = if flip { light_axis_flip() } else { Quat::IDENTITY };
-            channel(&mut self.bin, node, "translation", input, keys.iter().flat_map(|k| k.transform.translation).collect(), 3);
-            let rotations =
-                keys.iter().flat_map(|k| (Quat::from_array(k.transform.rotation).normalize() * turn).to_array()).collect();
+            channel(
+                &mut self.bin,
+                node,
+                "translation",
+                input,
+                keys.iter().flat_map(|k| k.transform.translation).collect(),
+                3,
+            );
+            let rotations = keys
+                .iter()
+                .flat_map(|k| (Quat::from_array(k.transform.rotation).normalize() * turn).to_array())
+                .collect();
             channel(&mut self.bin, node, "rotation", input, rotations, 4);
             if !flip {
                 channel(&mut self.bin, node, "scale", input, keys.iter().flat_map(|k| k.transform.scale).collect(), 3);

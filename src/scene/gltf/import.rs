@@ -110,13 +110,13 @@ impl<'a> Importer<'a> {
         self.grow_bounds(&world, &positions);
         let (transform, positions) = match decompose(&world) {
             Some(trs) => (trs, positions),
-            None if info.dynamic => {
-                return Err(invalid(
-                    label,
-                    "its world matrix has shear (a non-uniform scale under a rotation), which a moving object cannot have",
-                ))
+            None if info.dynamic => return Err(invalid(
+                label,
+                "its world matrix has shear (a non-uniform scale under a rotation), which a moving object cannot have",
+            )),
+            None => {
+                (Trs::default(), positions.iter().map(|p| world.transform_point3((*p).into()).to_array()).collect())
             }
-            None => (Trs::default(), positions.iter().map(|p| world.transform_point3((*p).into()).to_array()).collect()),
         };
         let material = prim.material();
         if let Some(radiance) = materials::emission(&material) {
@@ -145,7 +145,12 @@ impl<'a> Importer<'a> {
 
     /// A primitive's triangles, read once per (mesh, primitive, mirrored): a node whose world
     /// matrix mirrors (negative determinant) flips the winding, as glTF's front faces do.
-    fn primitive(&mut self, mesh: &gltf::Mesh, prim: &gltf::Primitive, mirrored: bool) -> Result<Primitive, SceneError> {
+    fn primitive(
+        &mut self,
+        mesh: &gltf::Mesh,
+        prim: &gltf::Primitive,
+        mirrored: bool,
+    ) -> Result<Primitive, SceneError> {
         let key = (mesh.index(), prim.index(), mirrored);
         if let Some(p) = self.primitives.get(&key) {
             return Ok(p.clone());
@@ -160,16 +165,17 @@ impl<'a> Importer<'a> {
         self.warn_attributes(&field, prim);
         let buffers = self.buffers;
         let reader = prim.reader(|b| buffers.get(b.index()).map(Vec::as_slice));
-        let positions: Vec<[f32; 3]> = reader
-            .read_positions()
-            .ok_or_else(|| invalid(format!("{field}.attributes"), "has no POSITION"))?
-            .collect();
+        let positions: Vec<[f32; 3]> =
+            reader.read_positions().ok_or_else(|| invalid(format!("{field}.attributes"), "has no POSITION"))?.collect();
         let flat: Vec<u32> = match reader.read_indices() {
             Some(i) => i.into_u32().collect(),
             None => (0..positions.len() as u32).collect(),
         };
         if flat.len() % 3 != 0 {
-            return Err(invalid(format!("{field}.indices"), format!("{} indices do not make whole triangles", flat.len())));
+            return Err(invalid(
+                format!("{field}.indices"),
+                format!("{} indices do not make whole triangles", flat.len()),
+            ));
         }
         let mut triangles: Vec<[u32; 3]> = flat.chunks_exact(3).map(|t| [t[0], t[1], t[2]]).collect();
         if mirrored {
@@ -208,10 +214,7 @@ impl<'a> Importer<'a> {
         if self.objects.len() >= self.budget.max_objects || self.lights.len() >= self.budget.max_lights {
             return Err(SceneError::TooLarge {
                 field: "nodes".into(),
-                message: format!(
-                    "more than {} objects or {} lights",
-                    self.budget.max_objects, self.budget.max_lights
-                ),
+                message: format!("more than {} objects or {} lights", self.budget.max_objects, self.budget.max_lights),
             });
         }
         Ok(())
@@ -280,7 +283,12 @@ impl<'a> Importer<'a> {
         let name = node.name().map(str::to_string).or(light.name().map(str::to_string));
         self.count(0)?;
         let name = unique(&mut self.light_names, name.unwrap_or_else(|| format!("light{}", node.index())));
-        self.lights.push(LightDesc { name: name.clone(), emitter, transform: punctual_trs(&info.world), dynamic: info.dynamic });
+        self.lights.push(LightDesc {
+            name: name.clone(),
+            emitter,
+            transform: punctual_trs(&info.world),
+            dynamic: info.dynamic,
+        });
         self.targets.push((info.index, Target::Light { name, punctual: true }));
         Ok(())
     }

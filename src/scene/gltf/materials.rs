@@ -35,10 +35,8 @@ pub fn material_label(m: &gltf::Material) -> String {
 pub fn convert(m: &gltf::Material, warnings: &mut Warnings) -> Material {
     let label = material_label(m);
     if m.index().is_none() {
-        warnings.add(
-            format!("primitives without a material are diffuse with reflectance {DEFAULT_REFLECTANCE}"),
-            &label,
-        );
+        warnings
+            .add(format!("primitives without a material are diffuse with reflectance {DEFAULT_REFLECTANCE}"), &label);
         return Material::Diffuse { reflectance: Rgb::splat(DEFAULT_REFLECTANCE) };
     }
     warn_unsupported(m, &label, warnings);

@@ -42,9 +42,14 @@ use std::path::Path;
 pub enum Target {
     Object(String),
     /// `punctual`: a point or spot light (its axis is flipped from glTF's −Z).
-    Light { name: String, punctual: bool },
+    Light {
+        name: String,
+        punctual: bool,
+    },
     /// The scene's camera, with its look-at distance.
-    Camera { focus: f32 },
+    Camera {
+        focus: f32,
+    },
 }
 
 /// How to read a glTF file.
@@ -96,7 +101,11 @@ pub fn import_file(path: &Path, root: &Path, options: &ImportOptions) -> Result<
 
 /// Reads glTF JSON or GLB bytes. Without `files` (a document sent inline) only the GLB chunk
 /// and `data:` URIs can hold buffers.
-pub fn import_slice(bytes: &[u8], files: Option<&FileContext>, options: &ImportOptions) -> Result<Imported, SceneError> {
+pub fn import_slice(
+    bytes: &[u8],
+    files: Option<&FileContext>,
+    options: &ImportOptions,
+) -> Result<Imported, SceneError> {
     if !(options.scale.is_finite() && options.scale > 0.0) {
         return Err(invalid("scale", format!("{} is not a positive finite number", options.scale)));
     }
@@ -153,13 +162,15 @@ fn choose_camera<'a>(
         node.camera().is_some().then_some((node, info))
     });
     let Some(name) = name else {
-        return Ok(with_camera
-            .into_iter()
-            .find(|(n, _)| n.camera().is_some_and(|c| matches!(c.projection(), gltf::camera::Projection::Perspective(_)))));
+        return Ok(with_camera.into_iter().find(|(n, _)| {
+            n.camera().is_some_and(|c| matches!(c.projection(), gltf::camera::Projection::Perspective(_)))
+        }));
     };
     let mut with_camera = with_camera;
     with_camera
-        .find(|(n, _)| n.name() == Some(name) || n.camera().and_then(|c| c.name().map(str::to_string)).as_deref() == Some(name))
+        .find(|(n, _)| {
+            n.name() == Some(name) || n.camera().and_then(|c| c.name().map(str::to_string)).as_deref() == Some(name)
+        })
         .map(Some)
         .ok_or_else(|| invalid("camera", format!("no camera or camera node named '{name}' in the scene")))
 }

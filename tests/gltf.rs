@@ -1,0 +1,535 @@
+//! glTF 2.0 import and export on real files: the bundled scenes exported and read back
+//! (round trip), the Cornell box as glTF against the JSON Cornell box, hand-built files for
+//! each feature the importer reads, and bad files, each refused with an error naming the part.
+mod common;
+
+use base64::Engine;
+use glam::{Mat4, Quat, Vec3};
+use relume::scene::animation::Animation;
+use relume::scene::edits::{apply, Edit};
+use relume::scene::gltf::{export_glb, import_slice, ImportOptions, Imported};
+use relume::scene::{LightGeometry, Material, Scene, SceneError, ShapeDesc};
+use relume::technique::TechniqueConfig;
+use serde_json::{json, Value};
+
+/// A bundled scene and its animation (if any), exported and imported back.
+fn round_trip(name: &str) -> (Scene, Option<Animation>, Imported) {
+    let root = common::scenes_dir();
+    let scene = common::load(&format!("{name}.json"));
+    let anim_path = root.join(format!("{name}.anim.json"));
+    let anim = anim_path.is_file().then(|| Animation::load(&anim_path).expect("animation"));
+    let anims: Vec<(String, Animation)> = anim.iter().map(|a| (name.to_string(), a.clone())).collect();
+    let glb = export_glb(&scene, &anims).expect("export");
+    let imported = import_slice(&glb, None, &ImportOptions::default()).expect("import of the export");
+    (scene, anim, imported)
+}
+
+fn close(a: Vec3, b: Vec3, tol: f32) -> bool {
+    (a - b).length() <= tol
+}
+
+/// Every difference between two scenes beyond `tol` (a length in scene units), as text.
+fn differences(a: &Scene, b: &Scene, tol: f32) -> Vec<String> {
+    let mut out = Vec::new();
+    if a.objects.len() != b.objects.len() || a.lights.len() != b.lights.len() {
+        return vec![format!(
+            "{} / {} objects, {} / {} lights",
+            a.objects.len(),
+            b.objects.len(),
+            a.lights.len(),
+            b.lights.len()
+        )];
+    }
+    for (x, y) in a.objects.iter().zip(&b.objects) {
+        if x.name != y.name || x.dynamic != y.dynamic || x.world_positions.len() != y.world_positions.len() {
+            out.push(format!("object {} vs {}", x.name, y.name));
+            continue;
+        }
+        if x.world_positions.iter().zip(&y.world_positions).any(|(p, q)| !close(*p, *q, tol)) {
+            out.push(format!("object {}: vertices moved", x.name));
+        }
+        if a.materials[x.material as usize] != b.materials[y.material as usize] {
+            out.push(format!("object {}: material", x.name));
+        }
+    }
+    for (x, y) in a.lights.iter().zip(&b.lights) {
+        if x.name != y.name || x.dynamic != y.dynamic {
+            out.push(format!("light {} vs {}", x.name, y.name));
+        }
+        let rgb = |p: relume::core::Rgb, q: relume::core::Rgb| {
+            (Vec3::from(p.to_array()) - Vec3::from(q.to_array())).length() <= 1e-5 * p.max_component().max(1.0)
+        };
+        let same = match (&x.geometry, &y.geometry) {
+            (
+                LightGeometry::Point { position: p, intensity: i },
+                LightGeometry::Point { position: q, intensity: j },
+            ) => close(*p, *q, tol) && rgb(*i, *j),
+            (
+                LightGeometry::Spot { position: p, axis: u, intensity: i, cos_falloff_start: s, cos_falloff_end: e },
+                LightGeometry::Spot { position: q, axis: v, intensity: j, cos_falloff_start: s2, cos_falloff_end: e2 },
+            ) => {
+                close(*p, *q, tol)
+                    && close(*u, *v, 1e-4)
+                    && rgb(*i, *j)
+                    && (s - s2).abs() < 1e-5
+                    && (e - e2).abs() < 1e-5
+            }
+            (
+                LightGeometry::Area { radiance: r, triangles: t, .. },
+                LightGeometry::Area { radiance: r2, triangles: t2, .. },
+            ) => {
+                rgb(*r, *r2)
+                    && t.len() == t2.len()
+                    && t.iter().zip(t2).all(|(p, q)| (0..3).all(|k| close(p[k], q[k], tol)))
+            }
+            _ => false,
+        };
+        if !same {
+            out.push(format!("light {}: {:?} vs {:?}", x.name, x.geometry_kind(), y.geometry_kind()));
+        }
+    }
+    let (c, d) = (&a.desc().camera, &b.desc().camera);
+    let dir = |c: &relume::scene::CameraDesc| (Vec3::from(c.look_at) - Vec3::from(c.position)).normalize();
+    if !close(c.position.into(), d.position.into(), tol)
+        || !close(dir(c), dir(d), 1e-4)
+        || (c.vfov_deg - d.vfov_deg).abs() > 1e-3
+        || c.resolution != d.resolution
+    {
+        out.push(format!("camera {c:?} vs {d:?}"));
+    }
+    out
+}
+
+trait Kind {
+    fn geometry_kind(&self) -> &'static str;
+}
+
+impl Kind for relume::scene::SceneLight {
+    fn geometry_kind(&self) -> &'static str {
+        match self.geometry {
+            LightGeometry::Point { .. } => "point",
+            LightGeometry::Spot { .. } => "spot",
+            LightGeometry::Area { .. } => "area",
+        }
+    }
+}
+
+fn extent(scene: &Scene) -> f32 {
+    scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0)
+}
+
+fn build(imported: &Imported) -> Scene {
+    Scene::from_desc(imported.desc.clone(), &common::scenes_dir(), &common::scenes_dir())
+        .expect("imported scene builds")
+}
+
+#[test]
+fn every_bundled_scene_survives_export_and_import() {
+    let mut names: Vec<String> = std::fs::read_dir(common::scenes_dir())
+        .expect("scenes")
+        .flatten()
+        .filter_map(|e| {
+            e.file_name().to_str()?.strip_suffix(".json").filter(|n| !n.ends_with(".anim")).map(str::to_string)
+        })
+        .collect();
+    names.sort();
+    assert!(names.len() >= 8, "bundled scenes: {names:?}");
+    for name in &names {
+        let (scene, anim, imported) = round_trip(name);
+        let back = build(&imported);
+        let tol = 1e-5 * extent(&scene);
+        let diff = differences(&scene, &back, tol);
+        assert!(diff.is_empty(), "{name}: {diff:?}");
+        // Negative control: the comparison sees a 0.1% move of the first object.
+        let mut moved = scene.clone();
+        let mut t = moved.desc().objects[0].transform;
+        t.translation[0] += 1e-3 * extent(&scene);
+        moved.set_object_transform(0, t);
+        assert!(!differences(&moved, &back, tol).is_empty(), "{name}: the comparison misses a moved object");
+        let Some(anim) = anim else { continue };
+        let (anim_name, back_anim) = &imported.animations[0];
+        assert_eq!(anim_name, name);
+        back_anim.validate(&back).unwrap_or_else(|e| panic!("{name}: imported animation: {e}"));
+        for k in 0..=8 {
+            let t = anim.duration * k as f32 / 8.0;
+            let (mut a, mut b) = (scene.clone(), back.clone());
+            apply(&mut a, anim.edits_at(t)).expect("original edits");
+            apply(&mut b, back_anim.edits_at(t)).expect("imported edits");
+            let diff = differences(&a, &b, 1e-4 * extent(&scene));
+            assert!(diff.is_empty(), "{name} at {t} s: {diff:?}");
+        }
+    }
+}
+
+#[test]
+fn the_cornell_box_as_gltf_renders_as_the_json_cornell_box() {
+    let (scene, _, imported) = round_trip("cornell-box");
+    assert!(imported.desc.objects.iter().all(|o| matches!(o.shape, ShapeDesc::Triangles { .. })));
+    let config = || TechniqueConfig::Path(common::path(4));
+    let json = common::render(scene.clone(), config(), 7, 4, 2).image;
+    let gltf = common::render(build(&imported), config(), 7, 4, 2).image;
+    // Same triangles, materials, light and seed: the same image up to float rounding.
+    let tolerance = 1e-6;
+    let err = common::rel_mse(&gltf, &json);
+    assert!(err < tolerance, "relMSE {err} between the glTF and JSON Cornell boxes");
+    // Negative control: one wall 2% darker is seen.
+    let mut darker = scene;
+    let wall = darker.material_names.iter().position(|n| n != "light").expect("a material");
+    let Material::Diffuse { reflectance } = darker.materials[wall].clone() else { panic!("diffuse wall expected") };
+    darker.set_material(wall, Material::Diffuse { reflectance: reflectance * 0.98 });
+    let control = common::render(darker, config(), 7, 4, 2).image;
+    assert!(common::rel_mse(&control, &json) > tolerance, "a 2% darker wall went unseen");
+}
+
+/// A glTF document being built by hand, buffers as one `data:` URI.
+#[derive(Default)]
+struct Doc {
+    bin: Vec<u8>,
+    views: Vec<Value>,
+    accessors: Vec<Value>,
+}
+
+impl Doc {
+    fn floats(&mut self, v: &[f32], kind: &str) -> usize {
+        let offset = self.bin.len();
+        self.bin.extend(v.iter().flat_map(|x| x.to_le_bytes()));
+        self.views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": v.len() * 4}));
+        let width = match kind {
+            "SCALAR" => 1,
+            "VEC3" => 3,
+            _ => 4,
+        };
+        let mut a =
+            json!({"bufferView": self.views.len() - 1, "componentType": 5126, "count": v.len() / width, "type": kind});
+        if kind == "VEC3" || kind == "SCALAR" {
+            let (mut lo, mut hi) = (vec![f32::MAX; width], vec![f32::MIN; width]);
+            for c in v.chunks(width) {
+                for k in 0..width {
+                    lo[k] = lo[k].min(c[k]);
+                    hi[k] = hi[k].max(c[k]);
+                }
+            }
+            a["min"] = json!(lo);
+            a["max"] = json!(hi);
+        }
+        self.accessors.push(a);
+        self.accessors.len() - 1
+    }
+
+    /// A unit right triangle in XY facing +Z, as a mesh primitive with `material`.
+    fn triangle(&mut self, material: Option<usize>) -> Value {
+        let p = self.floats(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], "VEC3");
+        let mut prim = json!({"attributes": {"POSITION": p}});
+        if let Some(m) = material {
+            prim["material"] = json!(m);
+        }
+        json!({"primitives": [prim]})
+    }
+
+    fn finish(self, mut root: Value) -> Vec<u8> {
+        let uri = format!(
+            "data:application/octet-stream;base64,{}",
+            base64::engine::general_purpose::STANDARD.encode(&self.bin)
+        );
+        root["asset"] = json!({"version": "2.0"});
+        root["buffers"] = json!([{"byteLength": self.bin.len(), "uri": uri}]);
+        root["bufferViews"] = json!(self.views);
+        root["accessors"] = json!(self.accessors);
+        serde_json::to_vec(&root).expect("json")
+    }
+}
+
+fn import(bytes: &[u8]) -> Result<Imported, SceneError> {
+    import_slice(bytes, None, &ImportOptions::default())
+}
+
+fn world_vertices(imported: &Imported, name: &str) -> Vec<Vec3> {
+    let scene = build(imported);
+    let i = scene.object_index(name).unwrap_or_else(|| panic!("no object {name}"));
+    scene.objects[i].world_positions.clone()
+}
+
+#[test]
+fn nested_node_transforms_compose_into_world_positions() {
+    let mut doc = Doc::default();
+    let mesh = doc.triangle(None);
+    let (q, t, s) = (Quat::from_rotation_z(0.5), Vec3::new(1.0, 2.0, 3.0), 2.0);
+    let bytes = doc.finish(json!({
+        "scene": 0, "scenes": [{"nodes": [0]}], "meshes": [mesh],
+        "nodes": [
+            {"name": "parent", "translation": t.to_array(), "rotation": q.to_array(), "children": [1]},
+            {"name": "child", "scale": [s, s, s], "children": [2]},
+            {"name": "leaf", "mesh": 0, "matrix": Mat4::from_translation(Vec3::X).to_cols_array()},
+        ],
+    }));
+    let imported = import(&bytes).expect("import");
+    let expected =
+        Mat4::from_rotation_translation(q, t) * Mat4::from_scale(Vec3::splat(s)) * Mat4::from_translation(Vec3::X);
+    let got = world_vertices(&imported, "leaf");
+    for (p, local) in got.iter().zip([Vec3::ZERO, Vec3::X, Vec3::Y]) {
+        assert!(close(*p, expected.transform_point3(local), 1e-5), "{p} vs {}", expected.transform_point3(local));
+    }
+    // The warnings name the missing material and the missing camera.
+    assert!(imported.warnings.iter().any(|w| w.contains("without a material")), "{:?}", imported.warnings);
+    assert!(imported.warnings.iter().any(|w| w.contains("no perspective camera")), "{:?}", imported.warnings);
+}
+
+fn materials_doc() -> Vec<u8> {
+    let mut doc = Doc::default();
+    let meshes: Vec<Value> = (0..6).map(|m| doc.triangle(Some(m))).collect();
+    let nodes: Vec<Value> = (0..6)
+        .map(|m| json!({"name": format!("n{m}"), "mesh": m, "translation": [m as f32 * 2.0, 0.0, 0.0]}))
+        .collect();
+    doc.finish(json!({
+        "scene": 0, "scenes": [{"nodes": [0, 1, 2, 3, 4, 5]}], "meshes": meshes, "nodes": nodes,
+        "extensionsUsed": ["KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_emissive_strength"],
+        "textures": [{"source": 0}], "images": [{"uri": "brick.png"}],
+        "materials": [
+            {"name": "paint", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.25, 0.125, 1.0], "metallicFactor": 0.0}},
+            {"name": "chrome", "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.8, 0.7, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.0}},
+            {"name": "glass", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}, "KHR_materials_ior": {"ior": 1.33}}},
+            {"name": "brushed", "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.6, 0.6, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.5}},
+            {"name": "brick", "pbrMetallicRoughness": {"baseColorFactor": [0.7, 0.3, 0.2, 1.0], "metallicFactor": 0.0, "baseColorTexture": {"index": 0}}},
+            {"name": "lamp", "emissiveFactor": [1.0, 0.5, 0.25], "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 8.0}}},
+        ],
+    }))
+}
+
+#[test]
+fn every_material_mapping_reads_as_documented() {
+    let imported = import(&materials_doc()).expect("import");
+    let m = &imported.desc.materials;
+    let rgb = relume::core::Rgb::new;
+    assert_eq!(m["paint"], Material::Diffuse { reflectance: rgb(0.5, 0.25, 0.125) });
+    assert_eq!(m["chrome"], Material::Mirror { reflectance: rgb(0.9, 0.8, 0.7) });
+    assert_eq!(m["glass"], Material::Glass { ior: 1.33 });
+    assert_eq!(m["brushed"], Material::Diffuse { reflectance: rgb(0.6, 0.6, 0.6) });
+    assert_eq!(m["brick"], Material::Diffuse { reflectance: rgb(0.7, 0.3, 0.2) });
+    assert!(!m.contains_key("lamp"), "an emissive material makes a light, not an object");
+    let lamp = imported.desc.lights.iter().find(|l| l.name == "n5").expect("the emissive primitive is a light");
+    let relume::scene::EmitterDesc::Mesh { radiance, .. } = &lamp.emitter else { panic!("a mesh emitter expected") };
+    assert_eq!(*radiance, rgb(8.0, 4.0, 2.0));
+    let w = imported.warnings.join("\n");
+    assert!(w.contains("metallic") && w.contains("'brushed'"), "{w}");
+    assert!(w.contains("base colour textures") && w.contains("'brick'"), "{w}");
+}
+
+#[test]
+fn punctual_lights_and_the_camera_read_in_relume_units() {
+    let mut doc = Doc::default();
+    let mesh = doc.triangle(None);
+    let down = Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2);
+    let bytes = doc.finish(json!({
+        "scene": 0, "scenes": [{"nodes": [0, 1, 2, 3]}], "meshes": [mesh],
+        "extensionsUsed": ["KHR_lights_punctual"],
+        "extensions": {"KHR_lights_punctual": {"lights": [
+            {"type": "point", "color": [1.0, 0.5, 0.25], "intensity": 683.0},
+            {"type": "spot", "intensity": 1366.0, "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}},
+        ]}},
+        "cameras": [{"name": "main", "type": "perspective", "perspective": {"yfov": 0.8, "aspectRatio": 2.0, "znear": 0.01}}],
+        "nodes": [
+            {"name": "floor", "mesh": 0},
+            {"name": "bulb", "translation": [0.0, 3.0, 0.0], "extensions": {"KHR_lights_punctual": {"light": 0}}},
+            {"name": "spot", "translation": [0.0, 4.0, 0.0], "rotation": down.to_array(), "extensions": {"KHR_lights_punctual": {"light": 1}}},
+            {"name": "eye", "translation": [0.0, 1.0, 5.0], "camera": 0},
+        ],
+    }));
+    let imported = import(&bytes).expect("import");
+    let scene = build(&imported);
+    let bulb = &scene.lights[scene.light_index("bulb").expect("bulb")];
+    let LightGeometry::Point { position, intensity } = bulb.geometry else { panic!("point") };
+    assert_eq!(position, Vec3::new(0.0, 3.0, 0.0));
+    assert_eq!(intensity, relume::core::Rgb::new(1.0, 0.5, 0.25), "683 cd is 1 W/sr");
+    let spot = &scene.lights[scene.light_index("spot").expect("spot")];
+    let LightGeometry::Spot { axis, intensity, cos_falloff_start, cos_falloff_end, .. } = spot.geometry else {
+        panic!("spot")
+    };
+    // glTF's −Z turned down by the node: the spot shines along (−Z rotated) = −Y.
+    assert!(close(axis, down * Vec3::NEG_Z, 1e-5), "axis {axis}");
+    assert!((intensity.g - 2.0).abs() < 1e-5);
+    assert!((cos_falloff_start - 0.2f32.cos()).abs() < 1e-5 && (cos_falloff_end - 0.5f32.cos()).abs() < 1e-5);
+    let cam = &imported.desc.camera;
+    assert_eq!(cam.position, [0.0, 1.0, 5.0]);
+    assert!((cam.vfov_deg - 0.8f32.to_degrees()).abs() < 1e-4);
+    assert_eq!(cam.resolution, [512, 256], "aspect 2 at the default 256 rows");
+    let forward = (Vec3::from(cam.look_at) - Vec3::from(cam.position)).normalize();
+    assert!(close(forward, Vec3::NEG_Z, 1e-5), "glTF cameras look along −Z: {forward}");
+}
+
+/// An animation on node 0 (a parent) and node 1 (its child with the mesh), one channel per
+/// interpolation mode.
+fn animated_doc() -> Vec<u8> {
+    let mut doc = Doc::default();
+    let mesh = doc.triangle(None);
+    let t_lin = doc.floats(&[0.0, 2.0], "SCALAR");
+    let v_lin = doc.floats(&[0.0, 0.0, 0.0, 4.0, 0.0, 0.0], "VEC3");
+    let t_step = doc.floats(&[0.0, 1.0], "SCALAR");
+    let v_step = doc.floats(&[0.0, 0.0, 0.0, 0.0, 5.0, 0.0], "VEC3");
+    let t_cub = doc.floats(&[0.0, 2.0], "SCALAR");
+    // (in-tangent, value, out-tangent) per key: a scale from 1 to 3 with zero tangents.
+    let v_cub =
+        doc.floats(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3.0, 3.0, 3.0, 0.0, 0.0, 0.0], "VEC3");
+    doc.finish(json!({
+        "scene": 0, "scenes": [{"nodes": [0]}], "meshes": [mesh],
+        "nodes": [{"name": "rig", "children": [1]}, {"name": "body", "mesh": 0}],
+        "animations": [{"name": "walk",
+            "samplers": [
+                {"input": t_lin, "output": v_lin, "interpolation": "LINEAR"},
+                {"input": t_step, "output": v_step, "interpolation": "STEP"},
+                {"input": t_cub, "output": v_cub, "interpolation": "CUBICSPLINE"},
+            ],
+            "channels": [
+                {"sampler": 0, "target": {"node": 0, "path": "translation"}},
+                {"sampler": 1, "target": {"node": 1, "path": "translation"}},
+                {"sampler": 2, "target": {"node": 1, "path": "scale"}},
+            ]}],
+    }))
+}
+
+#[test]
+fn animations_read_linear_step_and_cubic_channels_through_the_hierarchy() {
+    let imported = import(&animated_doc()).expect("import");
+    assert!(imported.desc.objects[0].dynamic, "an animated node's mesh is dynamic");
+    let anim = imported.animation("walk").expect("named as the file names it");
+    let scene = build(&imported);
+    anim.validate(&scene).expect("valid against its scene");
+    let pose = |t: f32| {
+        let edits = anim.edits_at(t);
+        let Some(Edit::Object { transform, .. }) = edits.first() else { panic!("an object edit") };
+        *transform
+    };
+    // glTF's own definitions, evaluated by hand: LINEAR x = 2t, STEP y = 5 from t = 1,
+    // CUBICSPLINE scale 1 + 2(3s² − 2s³) with s = t/2 and zero tangents.
+    for t in [0.25f32, 0.5, 0.99, 1.01, 1.5, 1.95] {
+        let got = pose(t);
+        let s = t / 2.0;
+        let scale = 1.0 + 2.0 * (3.0 * s * s - 2.0 * s * s * s);
+        let y = if t < 1.0 { 0.0 } else { 5.0 };
+        assert!((got.translation[0] - 2.0 * t).abs() < 1e-4, "t {t}: x {}", got.translation[0]);
+        assert!((got.translation[1] - y).abs() < 1e-4, "t {t}: y {}", got.translation[1]);
+        // Cubic segments are sampled at 8 points: between them the error is that of a chord.
+        assert!((got.scale[0] - scale).abs() < 0.02, "t {t}: scale {} vs {scale}", got.scale[0]);
+    }
+    assert!(imported.warnings.iter().any(|w| w.contains("CUBICSPLINE")), "{:?}", imported.warnings);
+}
+
+#[test]
+fn a_glb_and_a_gltf_with_an_external_bin_read_the_same() {
+    let dir = tempdir("external-bin");
+    let bytes = animated_doc();
+    let mut root: Value = serde_json::from_slice(&bytes).expect("json");
+    let uri = root["buffers"][0]["uri"].as_str().expect("uri").to_string();
+    let payload =
+        base64::engine::general_purpose::STANDARD.decode(uri.split_once(',').expect("data uri").1).expect("b64");
+    std::fs::write(dir.join("walk data.bin"), &payload).expect("bin");
+    root["buffers"][0]["uri"] = json!("walk%20data.bin");
+    std::fs::write(dir.join("walk.gltf"), serde_json::to_vec(&root).expect("json")).expect("gltf");
+    let loaded = Scene::load_file(&dir.join("walk.gltf"), &dir, &ImportOptions::default()).expect("external .bin");
+    // The same document as GLB, through the exporter.
+    let glb = export_glb(&loaded.scene, &loaded.animations).expect("export");
+    std::fs::write(dir.join("walk.glb"), &glb).expect("glb");
+    let from_glb = Scene::load_file(&dir.join("walk.glb"), &dir, &ImportOptions::default()).expect("glb");
+    assert!(differences(&loaded.scene, &from_glb.scene, 1e-5).is_empty());
+    assert_eq!(from_glb.animations[0].0, "walk");
+    // An external buffer outside the scenes root is refused, naming the buffer.
+    root["buffers"][0]["uri"] = json!("../outside.bin");
+    std::fs::write(dir.join("escape.gltf"), serde_json::to_vec(&root).expect("json")).expect("gltf");
+    let err = Scene::load_file(&dir.join("escape.gltf"), &dir, &ImportOptions::default()).err().expect("refused");
+    assert!(err.to_string().contains("buffers[0].uri") && err.to_string().contains("escapes"), "{err}");
+}
+
+fn tempdir(tag: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("relume-gltf-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+#[test]
+fn bad_files_are_refused_naming_the_part() {
+    let base: Value = serde_json::from_slice(&materials_doc()).expect("json");
+    let cases: Vec<(&str, Box<dyn Fn(&mut Value)>, &str)> = vec![
+        (
+            "lines",
+            Box::new(|d: &mut Value| d["meshes"][0]["primitives"][0]["mode"] = json!(1)),
+            "meshes[0].primitives[0].mode",
+        ),
+        (
+            "shear",
+            Box::new(
+                |d: &mut Value| d["nodes"][0] = json!({"name": "n0", "mesh": 0, "matrix": [1.0, 0.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]}),
+            ),
+            "nodes[0] ('n0').matrix",
+        ),
+        (
+            "sun",
+            Box::new(|d: &mut Value| {
+                d["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "directional"}]}});
+                d["nodes"][0]["extensions"] = json!({"KHR_lights_punctual": {"light": 0}});
+            }),
+            "directional",
+        ),
+        ("cycle", Box::new(|d: &mut Value| d["nodes"][1]["children"] = json!([1])), "nodes[1]"),
+        ("short buffer", Box::new(|d: &mut Value| d["buffers"][0]["byteLength"] = json!(1 << 20)), "buffers[0]"),
+        ("file buffer inline", Box::new(|d: &mut Value| d["buffers"][0]["uri"] = json!("mesh.bin")), "buffers[0].uri"),
+        (
+            "no scene",
+            Box::new(|d: &mut Value| {
+                d.as_object_mut().expect("object").remove("scene");
+                d["scenes"] = json!([]);
+            }),
+            "scenes",
+        ),
+    ];
+    for (what, mutate, part) in cases {
+        let mut doc = base.clone();
+        mutate(&mut doc);
+        let err = import(&serde_json::to_vec(&doc).expect("json")).err().unwrap_or_else(|| panic!("{what}: accepted"));
+        assert!(err.to_string().contains(part), "{what}: '{err}' does not name {part}");
+    }
+    // Non-finite data and a bad index live in the buffers: build them so.
+    let mut doc = Doc::default();
+    let p = doc.floats(&[0.0, 0.0, 0.0, f32::NAN, 0.0, 0.0, 0.0, 1.0, 0.0], "VEC3");
+    let bytes = doc.finish(json!({"scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], "meshes": [{"primitives": [{"attributes": {"POSITION": p}}]}]}));
+    let err = import(&bytes).err().expect("NaN refused");
+    assert!(err.to_string().contains("positions[1][0]"), "{err}");
+}
+
+#[test]
+fn mangled_glb_bytes_are_refused_or_read_never_a_panic() {
+    let glb = export_glb(&common::load("walker.json"), &[]).expect("export");
+    use proptest::prelude::*;
+    let mut runner = proptest::test_runner::TestRunner::new(ProptestConfig { cases: 400, ..ProptestConfig::default() });
+    let len = glb.len();
+    runner
+        .run(&proptest::collection::vec((0..len, any::<u8>()), 1..8), |flips| {
+            let mut bytes = glb.clone();
+            for (at, v) in flips {
+                bytes[at] = v;
+            }
+            let _ = import(&bytes);
+            Ok(())
+        })
+        .expect("no panic");
+}
+
+#[test]
+fn every_technique_renders_the_exported_mesh_light_as_the_rect_light() {
+    let (scene, _, imported) = round_trip("cornell-box");
+    let back = build(&imported);
+    assert!(imported.desc.lights.iter().all(|l| matches!(l.emitter, relume::scene::EmitterDesc::Mesh { .. })));
+    let tolerance = 1e-6;
+    let mut dimmer = scene.clone();
+    let desc = dimmer.desc().lights[0].clone();
+    let relume::scene::EmitterDesc::Rect { radiance } = desc.emitter else { panic!("a rect light expected") };
+    dimmer.set_light(0, desc.transform, relume::scene::EmitterDesc::Rect { radiance: radiance * 0.98 });
+    for config in common::small_techniques() {
+        let label = format!("{config:?}");
+        let json = common::render(scene.clone(), config.clone(), 3, 2, 2).image;
+        let gltf = common::render(back.clone(), config.clone(), 3, 2, 2).image;
+        let err = common::rel_mse(&gltf, &json);
+        assert!(err < tolerance, "{label}: relMSE {err} between the mesh light and the rect light");
+        // Negative control: a light 2% dimmer is seen.
+        let control = common::render(dimmer.clone(), config, 3, 2, 2).image;
+        assert!(common::rel_mse(&control, &json) > tolerance, "{label}: a 2% dimmer light went unseen");
+    }
+}
