@@ -7,6 +7,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup.sh scripts/packages.txt scripts/test-packages.txt
 scripts/pytools.sh
+scripts/nodetools.sh
 export PATH="$HOME/.cargo/bin:$PATH"
 cargo build --release --locked
 # Which of Embree's kernel families this CPU runs, and which it skips.

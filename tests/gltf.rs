@@ -447,7 +447,8 @@ fn tempdir(tag: &str) -> std::path::PathBuf {
 #[test]
 fn bad_files_are_refused_naming_the_part() {
     let base: Value = serde_json::from_slice(&materials_doc()).expect("json");
-    let cases: Vec<(&str, Box<dyn Fn(&mut Value)>, &str)> = vec![
+    type Mutation = Box<dyn Fn(&mut Value)>;
+    let cases: Vec<(&str, Mutation, &str)> = vec![
         (
             "lines",
             Box::new(|d: &mut Value| d["meshes"][0]["primitives"][0]["mode"] = json!(1)),
@@ -490,7 +491,7 @@ fn bad_files_are_refused_naming_the_part() {
     let mut doc = Doc::default();
     let p = doc.floats(&[0.0, 0.0, 0.0, f32::NAN, 0.0, 0.0, 0.0, 1.0, 0.0], "VEC3");
     let bytes = doc.finish(json!({"scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], "meshes": [{"primitives": [{"attributes": {"POSITION": p}}]}]}));
-    let err = import(&bytes).err().expect("NaN refused");
+    let err = import(&bytes).expect_err("NaN refused");
     assert!(err.to_string().contains("positions[1][0]"), "{err}");
 }
 
@@ -532,4 +533,141 @@ fn every_technique_renders_the_exported_mesh_light_as_the_rect_light() {
         let control = common::render(dimmer.clone(), config, 3, 2, 2).image;
         assert!(common::rel_mse(&control, &json) > tolerance, "{label}: a 2% dimmer light went unseen");
     }
+}
+
+#[test]
+fn the_bundled_glb_files_are_what_the_exporter_writes() {
+    let root = common::scenes_dir();
+    let mut checked = 0;
+    for entry in std::fs::read_dir(&root).expect("scenes").flatten() {
+        let path = entry.path();
+        if path.extension().and_then(|e| e.to_str()) != Some("glb") {
+            continue;
+        }
+        let stem = path.file_stem().and_then(|s| s.to_str()).expect("name").to_string();
+        let scene = common::load(&format!("{stem}.json"));
+        let anim_path = root.join(format!("{stem}.anim.json"));
+        let anims: Vec<(String, Animation)> = if anim_path.is_file() {
+            vec![(stem.clone(), Animation::load(&anim_path).expect("animation"))]
+        } else {
+            Vec::new()
+        };
+        let fresh = export_glb(&scene, &anims).expect("export");
+        let shipped = std::fs::read(&path).expect("glb");
+        assert!(fresh == shipped, "scenes/{stem}.glb is stale: run scripts/export-scenes.sh");
+        checked += 1;
+    }
+    let json_scenes = std::fs::read_dir(&root)
+        .expect("scenes")
+        .flatten()
+        .filter(|e| e.file_name().to_str().is_some_and(|n| n.ends_with(".json") && !n.ends_with(".anim.json")))
+        .count();
+    assert_eq!(checked, json_scenes, "every bundled JSON scene ships as .glb");
+}
+
+/// Runs the Khronos glTF validator (scripts/nodetools.sh installs it; scripts/test.sh does) on
+/// `files`: the number of errors per file.
+fn khronos_errors(files: &[std::path::PathBuf]) -> Vec<u64> {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    assert!(
+        root.join(".deps/nodetools/node_modules/gltf-validator").is_dir(),
+        "the Khronos glTF validator is missing: run scripts/nodetools.sh (scripts/test.sh does)"
+    );
+    let out = std::process::Command::new("node")
+        .arg(root.join("scripts/gltf-validate.js"))
+        .args(files)
+        .output()
+        .expect("node");
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .map(|l| {
+            let v: Value = serde_json::from_str(l).unwrap_or_else(|e| panic!("validator output '{l}': {e}"));
+            assert!(v["errors"].as_u64() == Some(0) || !v["messages"].as_array().expect("messages").is_empty());
+            v["errors"].as_u64().expect("errors")
+        })
+        .collect()
+}
+
+#[test]
+fn exports_pass_the_khronos_validator_with_no_errors() {
+    let dir = tempdir("khronos");
+    let mut files = Vec::new();
+    for (name, bytes) in [("animated", animated_doc()), ("materials", materials_doc())] {
+        let loaded = import(&bytes).expect("import");
+        let scene = build(&loaded);
+        let path = dir.join(format!("{name}.glb"));
+        std::fs::write(&path, export_glb(&scene, &loaded.animations).expect("export")).expect("write");
+        files.push(path);
+    }
+    for entry in std::fs::read_dir(common::scenes_dir()).expect("scenes").flatten() {
+        if entry.path().extension().and_then(|e| e.to_str()) == Some("glb") {
+            files.push(entry.path());
+        }
+    }
+    let errors = khronos_errors(&files);
+    assert_eq!(errors.len(), files.len());
+    for (file, n) in files.iter().zip(&errors) {
+        assert_eq!(*n, 0, "{}: {n} validation errors", file.display());
+    }
+    // Negative control: the same validator finds an accessor whose declared bounds are wrong.
+    let glb = std::fs::read(common::scenes_dir().join("cornell-box.glb")).expect("glb");
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().expect("header")) as usize;
+    let mut doc: Value = serde_json::from_slice(&glb[20..20 + json_len]).expect("json chunk");
+    std::fs::write(dir.join("broken.bin"), &glb[28 + json_len..]).expect("bin");
+    doc["buffers"][0]["uri"] = json!("broken.bin");
+    doc["accessors"][0]["max"] = json!([0.0, 0.0, 0.0]);
+    let broken = dir.join("broken.gltf");
+    std::fs::write(&broken, serde_json::to_vec(&doc).expect("json")).expect("gltf");
+    assert!(khronos_errors(&[broken])[0] > 0, "the validator missed a wrong accessor bound");
+}
+
+/// A floor and a small square lamp above it, as OBJ with an emissive MTL material.
+const ROOM_OBJ: &str = "mtllib room.mtl\no floor\nv -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nusemtl grey\nf 1 4 3 2\n\
+o lamp\nv -0.3 1 -0.3\nv 0.3 1 -0.3\nv 0.3 1 0.3\nv -0.3 1 0.3\nusemtl glow\nf 5 6 7 8\n";
+const ROOM_MTL: &str = "newmtl grey\nKd 0.5 0.5 0.5\nnewmtl glow\nKd 0 0 0\nKe 4 4 4\n";
+
+#[test]
+fn a_file_written_by_obj2gltf_reads_as_the_scene_it_describes() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let tool = root.join(".deps/nodetools/node_modules/.bin/obj2gltf");
+    assert!(tool.is_file(), "obj2gltf is missing: run scripts/nodetools.sh (scripts/test.sh does)");
+    let dir = tempdir("obj2gltf");
+    std::fs::write(dir.join("room.obj"), ROOM_OBJ).expect("obj");
+    std::fs::write(dir.join("room.mtl"), ROOM_MTL).expect("mtl");
+    let out = dir.join("room.glb");
+    let status = std::process::Command::new(&tool)
+        .arg("-i")
+        .arg(dir.join("room.obj"))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .expect("obj2gltf");
+    assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    let loaded = Scene::load_file(&out, &dir, &ImportOptions::default()).expect("obj2gltf's file loads");
+    assert_eq!((loaded.scene.objects.len(), loaded.scene.lights.len()), (1, 1), "a floor and the emissive lamp");
+    // The twin: the scene the OBJ describes, written by hand in relume's JSON, seen through
+    // the camera the import framed.
+    let twin = |lamp: f32| {
+        common::scene_from_json(json!({
+            "camera": serde_json::to_value(&loaded.scene.desc().camera).expect("camera"),
+            "materials": {"grey": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+            "objects": [{"name": "floor", "material": "grey", "shape": {"type": "triangles",
+                "positions": [[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], "indices": [[0, 3, 2], [0, 2, 1]]}}],
+            "lights": [{"name": "lamp", "emitter": {"type": "mesh", "radiance": [lamp, lamp, lamp],
+                "positions": [[-0.3, 1, -0.3], [0.3, 1, -0.3], [0.3, 1, 0.3], [-0.3, 1, 0.3]], "indices": [[0, 1, 2], [0, 2, 3]]}}],
+        }))
+    };
+    let config = || TechniqueConfig::Path(common::path(4));
+    let from_tool = common::render(loaded.scene.clone(), config(), 5, 4, 2).image;
+    let by_hand = common::render(twin(4.0), config(), 5, 4, 2).image;
+    // Same seed and the same triangles (up to their order): the 4×4 block means agree within
+    // 5%, far inside what a 20% dimmer lamp moves them.
+    let (a, b) = (common::block_means(&from_tool), common::block_means(&by_hand));
+    let rel =
+        |x: &[f64], y: &[f64]| x.iter().zip(y).map(|(p, q)| (p - q).abs() / q.abs().max(1e-3)).fold(0.0, f64::max);
+    let tolerance = 0.05;
+    assert!(rel(&a, &b) < tolerance, "obj2gltf's room differs from the hand-written one by {}", rel(&a, &b));
+    // Negative control: the twin with a 20% dimmer lamp is told apart.
+    let dimmer = common::block_means(&common::render(twin(3.2), config(), 5, 4, 2).image);
+    assert!(rel(&dimmer, &b) > tolerance, "a 20% dimmer lamp went unseen");
 }

@@ -7,11 +7,14 @@
 //! [`Limits`]: super::Limits
 use super::error::ApiError;
 use super::protocol::{CreateSession, PlayingAnimation, SessionView};
-use super::state::{valid_name, view, AppState, Reservation, SessionEntry, SessionSettings, MIN_TICK_HZ};
+use super::state::{
+    bundled_scene_file, valid_scene_name, view, AppState, Reservation, SessionEntry, SessionSettings, MIN_TICK_HZ,
+};
 use super::worker::{SessionHandle, WorkerContext};
 use crate::engine::{Progress, Session};
 use crate::film::DenoiseError;
-use crate::scene::{Scene, SceneError};
+use crate::scene::animation::Animation;
+use crate::scene::{LoadedScene, Scene, SceneError};
 use crate::technique::{path::PathConfig, TechniqueConfig, TechniqueError};
 use axum::http::StatusCode;
 use std::path::PathBuf;
@@ -30,6 +33,26 @@ pub(super) struct Plan {
     pub resume: Option<(Progress, Option<PlayingAnimation>)>,
     /// Prefix of the fields errors name: `""`, or `"snapshot."` for a restore.
     pub field: &'static str,
+    /// The scene's load report (what a glTF file held that relume reads only in part).
+    pub warnings: Vec<String>,
+    /// A glTF scene's own animations, by name.
+    pub animations: Vec<(String, Animation)>,
+}
+
+/// A scene sent as base64 binary glTF: decoded and imported within the limits.
+fn inline_glb(
+    glb: &str,
+    root: &std::path::Path,
+    options: &crate::scene::gltf::ImportOptions,
+) -> Result<LoadedScene, ApiError> {
+    use base64::Engine;
+    let bytes = base64::engine::general_purpose::STANDARD
+        .decode(glb.trim())
+        .map_err(|e| ApiError::invalid(format!("scene_glb: not base64: {e}")))?;
+    let imported = crate::scene::gltf::import_slice(&bytes, None, options).map_err(|e| scene_error("scene_glb.", e))?;
+    let scene = Scene::from_desc_within(imported.desc, root, root, &options.budget)
+        .map_err(|e| scene_error("scene_glb: ", e))?;
+    Ok(LoadedScene { scene, warnings: imported.warnings, animations: imported.animations })
 }
 
 /// The denoiser could not start: 422 when this build lacks it, 503 when OIDN is missing.
@@ -72,36 +95,48 @@ impl AppState {
         self.start(plan, reservation)
     }
 
-    /// A new session from a bundled scene's name or an inline scene document.
+    /// A new session from a bundled scene's name, an inline scene document, or an inline
+    /// binary glTF (`scene_glb`, base64).
     fn plan_new(&self, req: CreateSession) -> Result<Plan, ApiError> {
         let root = &self.config.scenes_root;
-        let budget = self.config.limits.scene_budget();
-        let (scene_name, scene_dir, scene) = match &req.scene {
-            Some(serde_json::Value::String(name)) => {
-                if !valid_name(name) {
+        let options = crate::scene::gltf::ImportOptions {
+            budget: self.config.limits.scene_budget(),
+            max_buffer_bytes: self.config.limits.max_body_bytes as u64,
+            ..Default::default()
+        };
+        let budget = &options.budget;
+        let (scene_name, scene_dir, loaded) = match (&req.scene, &req.scene_glb) {
+            (Some(_), Some(_)) => return Err(ApiError::invalid("scene_glb: give either scene or scene_glb, not both")),
+            (None, Some(glb)) => ("inline".to_string(), None, inline_glb(glb, root, &options)?),
+            (Some(serde_json::Value::String(name)), None) => {
+                if !valid_scene_name(name) {
                     return Err(ApiError::invalid(format!(
-                        "scene: '{name}' is not a scene name (letters, digits, '-' and '_')"
+                        "scene: '{name}' is not a scene name (letters, digits, '-' and '_', or a .glb/.gltf file name)"
                     )));
                 }
-                let path = root.join(format!("{name}.json"));
-                if !path.is_file() {
+                let Some(path) = bundled_scene_file(root, name) else {
                     return Err(ApiError::not_found(format!("scene: no bundled scene '{name}' (see GET /v1/scenes)")));
-                }
-                let scene = Scene::load_within(&path, root, &budget)
+                };
+                let loaded = Scene::load_file(&path, root, &options)
                     .map_err(|e| scene_error(&format!("scene '{name}': "), e))?;
-                (name.clone(), Some(root.clone()), scene)
+                (name.clone(), Some(root.clone()), loaded)
             }
-            Some(value @ serde_json::Value::Object(_)) => {
+            (Some(value @ serde_json::Value::Object(_)), None) => {
                 let desc = crate::scene::load::parse_json(&value.to_string())
                     .map_err(|e| ApiError::invalid(format!("scene.{e}")))?;
-                let scene = Scene::from_desc_within(desc, root, root, &budget).map_err(|e| scene_error("scene.", e))?;
-                ("inline".to_string(), None, scene)
+                let scene = Scene::from_desc_within(desc, root, root, budget).map_err(|e| scene_error("scene.", e))?;
+                ("inline".to_string(), None, LoadedScene { scene, warnings: Vec::new(), animations: Vec::new() })
             }
-            Some(_) => {
+            (Some(_), None) => {
                 return Err(ApiError::invalid("scene: expected a scene name (string) or an inline scene (object)"))
             }
-            None => return Err(ApiError::invalid("scene: missing: give a scene name, an inline scene, or a snapshot")),
+            (None, None) => {
+                return Err(ApiError::invalid(
+                    "scene: missing: give a scene name, an inline scene, scene_glb, or a snapshot",
+                ))
+            }
         };
+        let LoadedScene { scene, warnings, animations } = loaded;
         let (width, height) = (req.width.unwrap_or(scene.camera.width), req.height.unwrap_or(scene.camera.height));
         let settings = SessionSettings {
             technique: req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default())),
@@ -111,7 +146,7 @@ impl AppState {
             tick_hz: req.tick_hz,
             denoise: req.denoise,
         };
-        Ok(Plan { scene_name, scene_dir, scene, settings, resume: None, field: "" })
+        Ok(Plan { scene_name, scene_dir, scene, settings, resume: None, field: "", warnings, animations })
     }
 
     /// Checks a plan against the limits, builds its session and starts its worker.
@@ -155,6 +190,8 @@ impl AppState {
             id: id.clone(),
             scene: plan.scene_name,
             scene_dir: plan.scene_dir,
+            warnings: plan.warnings,
+            animations: plan.animations,
             settings,
             first_tick,
             last_active: AtomicU64::new(self.now_ms()),

@@ -22,6 +22,10 @@ pub struct ErrorBody {
 pub struct CreateSession {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub scene: Option<serde_json::Value>,
+    /// A binary glTF 2.0 scene (`.glb`), base64: buffers in its binary chunk or `data:`
+    /// URIs, within the body and scene limits.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scene_glb: Option<String>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub snapshot: Option<Box<Snapshot>>,
     #[serde(default)]
@@ -50,6 +54,7 @@ impl CreateSession {
     pub fn fields_besides_snapshot(&self) -> Vec<&'static str> {
         let given = [
             ("scene", self.scene.is_some()),
+            ("scene_glb", self.scene_glb.is_some()),
             ("technique", self.technique.is_some()),
             ("width", self.width.is_some()),
             ("height", self.height.is_some()),
@@ -140,6 +145,9 @@ pub struct SessionView {
     pub state: String,
     pub failure: Option<String>,
     pub last_stats: Option<TickStats>,
+    /// The scene's load report: what a glTF file holds that relume reads only in part.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
     pub links: SessionLinks,
 }
 

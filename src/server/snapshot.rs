@@ -16,7 +16,7 @@
 use super::create::{scene_error, Plan};
 use super::error::ApiError;
 use super::protocol::{Snapshot, SnapshotFormat};
-use super::state::{valid_name, AppState, SessionEntry, SessionSettings};
+use super::state::{bundled_scene_file, AppState, SessionEntry, SessionSettings};
 use super::worker::SnapshotParts;
 use crate::engine::Progress;
 use crate::scene::Scene;
@@ -74,9 +74,23 @@ impl AppState {
             playing.animation.validate(&scene).map_err(|e| ApiError::invalid(format!("snapshot.animation.{e}")))?;
         }
         // Animations are found by name next to a bundled scene of this node's root.
-        let bundled = valid_name(&snapshot.scene_name) && root.join(format!("{}.json", snapshot.scene_name)).is_file();
-        let (scene_name, scene_dir) =
-            if bundled { (snapshot.scene_name, Some(root.clone())) } else { ("inline".to_string(), None) };
+        let bundled = bundled_scene_file(root, &snapshot.scene_name);
+        // A bundled glTF scene's animations come from its file again (the snapshot holds the
+        // scene, not the file's animations).
+        let animations = match &bundled {
+            Some(path) if crate::scene::gltf::is_gltf_path(path) => {
+                let options = crate::scene::gltf::ImportOptions {
+                    budget: self.config.limits.scene_budget(),
+                    ..Default::default()
+                };
+                crate::scene::gltf::import_file(path, root, &options).map(|i| i.animations).unwrap_or_default()
+            }
+            _ => Vec::new(),
+        };
+        let (scene_name, scene_dir) = match bundled {
+            Some(_) => (snapshot.scene_name, Some(root.clone())),
+            None => ("inline".to_string(), None),
+        };
         let progress = Progress {
             tick: snapshot.tick,
             edits_accepted: snapshot.edits_accepted,
@@ -98,6 +112,8 @@ impl AppState {
             settings,
             resume: Some((progress, snapshot.animation)),
             field: "snapshot.",
+            warnings: Vec::new(),
+            animations,
         })
     }
 }

@@ -142,6 +142,10 @@ pub struct SessionEntry {
     pub scene: String,
     /// Folder of the scene file, where its animations live (`None` for inline scenes).
     pub scene_dir: Option<PathBuf>,
+    /// The scene's load report.
+    pub warnings: Vec<String>,
+    /// A glTF scene's own animations, which `play` finds by name.
+    pub animations: Vec<(String, crate::scene::animation::Animation)>,
     pub settings: SessionSettings,
     /// The number of its first tick: 0, or the snapshot's tick for a restored session.
     pub first_tick: u64,
@@ -237,6 +241,25 @@ pub fn valid_name(name: &str) -> bool {
     !name.is_empty() && name.len() <= 64 && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
 }
 
+/// A bundled scene's name: `NAME` (the file `NAME.json`), or a glTF file's name
+/// `NAME.glb` / `NAME.gltf`, with `NAME` a [`valid_name`].
+pub fn valid_scene_name(name: &str) -> bool {
+    match name.rsplit_once('.') {
+        Some((stem, "glb" | "gltf")) => valid_name(stem),
+        Some(_) => false,
+        None => valid_name(name),
+    }
+}
+
+/// The file of a bundled scene named as [`valid_scene_name`] says, if it exists in `root`.
+pub fn bundled_scene_file(root: &std::path::Path, name: &str) -> Option<PathBuf> {
+    if !valid_scene_name(name) {
+        return None;
+    }
+    let file = if name.contains('.') { name.to_string() } else { format!("{name}.json") };
+    Some(root.join(file)).filter(|p| p.is_file())
+}
+
 impl AppState {
     pub fn new(config: ServerConfig) -> Result<AppState, crate::engine::EngineError> {
         let pool = Arc::new(crate::engine::thread_pool(config.threads)?);
@@ -329,30 +352,49 @@ impl AppState {
         self.sessions.read().map(|s| s.len()).unwrap_or(0)
     }
 
-    /// Bundled scenes (`NAME.json`) with their animations (`NAME*.anim.json`).
+    /// Bundled scenes (`NAME.json`) with their animations (`NAME*.anim.json`), and glTF
+    /// scenes (`NAME.glb`, `NAME.gltf`, listed by file name) with the animations they hold.
     pub fn list_scenes(&self) -> Vec<SceneEntry> {
+        let root = &self.config.scenes_root;
         let mut names: Vec<String> = Vec::new();
         let mut anims: Vec<String> = Vec::new();
-        if let Ok(dir) = std::fs::read_dir(&self.config.scenes_root) {
-            for entry in dir.flatten() {
-                let file = entry.file_name().to_string_lossy().to_string();
-                if let Some(a) = file.strip_suffix(".anim.json") {
-                    anims.push(a.to_string());
-                } else if let Some(s) = file.strip_suffix(".json") {
-                    names.push(s.to_string());
-                }
+        let mut gltf: Vec<SceneEntry> = Vec::new();
+        for entry in std::fs::read_dir(root).into_iter().flatten().flatten() {
+            let file = entry.file_name().to_string_lossy().to_string();
+            if let Some(a) = file.strip_suffix(".anim.json") {
+                anims.push(a.to_string());
+            } else if let Some(s) = file.strip_suffix(".json") {
+                names.push(s.to_string());
+            } else if valid_scene_name(&file) && crate::scene::gltf::is_gltf_path(std::path::Path::new(&file)) {
+                gltf.push(SceneEntry { animations: self.gltf_animation_names(&entry.path()), name: file });
             }
         }
         names.sort();
         anims.sort();
-        names
+        let mut out: Vec<SceneEntry> = names
             .into_iter()
             .map(|name| {
                 let animations =
                     anims.iter().filter(|a| *a == &name || a.starts_with(&format!("{name}-"))).cloned().collect();
                 SceneEntry { name, animations }
             })
-            .collect()
+            .collect();
+        out.extend(gltf);
+        out.sort_by(|a, b| a.name.cmp(&b.name));
+        out
+    }
+
+    /// The names of a bundled glTF file's animations (none if it does not load).
+    fn gltf_animation_names(&self, path: &std::path::Path) -> Vec<String> {
+        let options =
+            crate::scene::gltf::ImportOptions { budget: self.config.limits.scene_budget(), ..Default::default() };
+        match crate::scene::gltf::import_file(path, &self.config.scenes_root, &options) {
+            Ok(imported) => imported.animations.into_iter().map(|(name, _)| name).collect(),
+            Err(e) => {
+                tracing::warn!("{}: {e}", path.display());
+                Vec::new()
+            }
+        }
     }
 
     /// Removes a session and stops its worker (blocking: call from `spawn_blocking`).
@@ -403,6 +445,7 @@ pub fn view(e: &SessionEntry) -> SessionView {
         state: if failure.is_some() { "failed".into() } else { "running".into() },
         failure,
         last_stats,
+        warnings: e.warnings.clone(),
         links: links(&e.id),
     }
 }

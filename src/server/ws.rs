@@ -252,6 +252,10 @@ pub fn check_speed(field: &str, speed: f32) -> Result<(), ApiError> {
 
 async fn play(entry: &SessionEntry, name: &str, speed: f32) -> Result<(), ApiError> {
     check_speed("speed", speed)?;
+    if let Some((_, a)) = entry.animations.iter().find(|(n, _)| n == name) {
+        let animation = a.clone();
+        return entry.handle.play(PlayingAnimation { animation, speed, clock_s: 0.0 }).await;
+    }
     if !valid_name(name) {
         return Err(ApiError::invalid(format!("anim: '{name}' is not an animation name")));
     }

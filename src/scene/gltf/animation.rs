@@ -94,7 +94,7 @@ pub fn convert(
         let field = format!("animations[{}]", anim.index());
         let channels = read_channels(&anim, buffers, &field, warnings)?;
         let duration = channels.values().flatten().filter_map(|c| c.times.last().copied()).fold(0.0f32, f32::max);
-        if !(duration > 0.0) {
+        if duration <= 0.0 {
             warnings.add("animations whose keys all lie at time 0 are not read", &field);
             continue;
         }
