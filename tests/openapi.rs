@@ -182,3 +182,79 @@ fn session_creation_links_to_every_operation_on_a_session() {
         operations(&spec).iter().filter_map(|(_, _, op)| op["operationId"].as_str().map(str::to_string)).collect();
     assert!(linked.is_subset(&ids), "a link names an operation that does not exist");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_registry_the_spec_and_get_techniques_agree() {
+    // Every registry parameter is a field of its technique's schema, its range lies inside the
+    // schema's and holds the default, and its choices are the schema's enum; the served list
+    // validates against the spec. Negative control: a parameter the schema lacks is caught.
+    let spec: serde_json::Value = serde_json::to_value(spec()).unwrap();
+    let variants = spec["components"]["schemas"]["TechniqueConfig"]["oneOf"].as_array().unwrap().clone();
+    let schema_of = |id: &str| {
+        variants
+            .iter()
+            .find(|v| v["properties"]["id"]["const"] == id)
+            .unwrap_or_else(|| panic!("{id}: no schema"))
+            .clone()
+    };
+    let check = |id: &str, p: &relume::technique::registry::Parameter| -> Result<(), String> {
+        use relume::technique::registry::ParameterKind;
+        let field = &schema_of(id)["properties"][p.name];
+        if field.is_null() {
+            return Err(format!("{id}.{}: not in the schema", p.name));
+        }
+        let default =
+            serde_json::to_value(relume::technique::registry::default_config(id).unwrap()).unwrap()[p.name].clone();
+        match p.kind {
+            ParameterKind::Integer { min, max } => {
+                let (lo, hi) = (field["minimum"].as_u64().unwrap_or(0), field["maximum"].as_u64().unwrap_or(u64::MAX));
+                let d = default.as_u64().ok_or(format!("{id}.{}: default {default} is not an integer", p.name))?;
+                if min < lo || max > hi || !(min..=max).contains(&d) {
+                    return Err(format!("{id}.{}: [{min}, {max}] vs schema [{lo}, {hi}], default {d}", p.name));
+                }
+            }
+            ParameterKind::Number { min, max } => {
+                let (lo, hi) =
+                    (field["minimum"].as_f64().unwrap_or(f64::MIN), field["maximum"].as_f64().unwrap_or(f64::MAX));
+                let d = default.as_f64().ok_or(format!("{id}.{}: default is not a number", p.name))?;
+                if min < lo || max > hi || !(min..=max).contains(&d) {
+                    return Err(format!("{id}.{}: [{min}, {max}] vs schema [{lo}, {hi}], default {d}", p.name));
+                }
+            }
+            ParameterKind::Choice { choices } => {
+                let enumed: Vec<&str> =
+                    field["enum"].as_array().map(|a| a.iter().filter_map(|v| v.as_str()).collect()).unwrap_or_default();
+                if enumed != choices {
+                    return Err(format!("{id}.{}: {choices:?} vs schema {enumed:?}", p.name));
+                }
+            }
+            ParameterKind::Boolean => {
+                if field["type"] != "boolean" {
+                    return Err(format!("{id}.{}: not a boolean in the schema", p.name));
+                }
+            }
+        }
+        Ok(())
+    };
+    for d in relume::technique::registry::REGISTRY {
+        for p in d.parameters {
+            check(d.id, p).unwrap();
+        }
+    }
+    let bogus = relume::technique::registry::Parameter {
+        name: "warp_factor",
+        kind: relume::technique::registry::ParameterKind::Boolean,
+        help: "",
+    };
+    assert!(check("path", &bogus).is_err(), "a parameter missing from the schema went unseen");
+    let s = TestServer::start(None, Limits::default()).await;
+    let list: serde_json::Value = s.http.get(s.url("/v1/techniques")).send().await.unwrap().json().await.unwrap();
+    let mut root = spec.clone();
+    root["$ref"] = serde_json::json!("#/components/schemas/TechniqueList");
+    let validator = jsonschema::validator_for(&root).expect("TechniqueList schema");
+    let errors: Vec<String> = validator.iter_errors(&list).map(|e| e.to_string()).collect();
+    assert!(errors.is_empty(), "{errors:?}");
+    let ids: Vec<&str> = list["techniques"].as_array().unwrap().iter().map(|t| t["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, relume::technique::TECHNIQUE_IDS);
+    s.shutdown().await.unwrap();
+}

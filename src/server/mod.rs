@@ -190,6 +190,7 @@ pub fn app(state: Arc<AppState>) -> Router {
     let limits = state.config.limits.clone();
     let v1 = Router::new()
         .route("/scenes", get(routes::list_scenes))
+        .route("/techniques", get(routes::list_techniques))
         .route("/sessions", post(routes::create_session).get(routes::list_sessions))
         .route("/sessions/{id}", get(routes::get_session).delete(routes::delete_session))
         .route("/sessions/{id}/scene", get(routes::get_scene))

@@ -201,6 +201,22 @@ pub struct SceneList {
     pub scenes: Vec<SceneEntry>,
 }
 
+/// One entry of `GET /v1/techniques`: a registry description and the configuration's defaults.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TechniqueEntry {
+    #[serde(flatten)]
+    pub description: crate::technique::registry::TechniqueDescription,
+    pub defaults: serde_json::Value,
+}
+
+/// `GET /v1/techniques`: every technique, and the server's limits that bound their parameters.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct TechniqueList {
+    pub techniques: Vec<TechniqueEntry>,
+    pub max_spp_per_tick: u32,
+    pub max_photon_paths: u32,
+}
+
 /// Image encodings a client can ask for.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -1,7 +1,10 @@
 //! HTTP handlers. Each maps client faults to a 4xx `{error, detail}` and never panics.
 use super::encoded::EncodingKey;
 use super::error::ApiError;
-use super::protocol::{CreateSession, EditBatch, SceneList, SessionList, SessionView, StatsHistory, TickDone};
+use super::protocol::{
+    CreateSession, EditBatch, SceneList, SessionList, SessionView, StatsHistory, TechniqueEntry, TechniqueList,
+    TickDone,
+};
 use super::state::{view, AppState};
 use crate::film::ImageFormat;
 use axum::body::{Body, Bytes};
@@ -86,6 +89,26 @@ pub async fn metrics(State(s): State<Shared>) -> Response {
 
 pub async fn list_scenes(State(s): State<Shared>) -> Json<SceneList> {
     Json(SceneList { scenes: s.list_scenes() })
+}
+
+/// `GET /v1/techniques`: the registry, each entry with its defaults and this server's limits
+/// on its parameters.
+pub async fn list_techniques(State(s): State<Shared>) -> Json<TechniqueList> {
+    let limits = &s.config.limits;
+    let techniques = crate::technique::registry::REGISTRY
+        .iter()
+        .map(|d| TechniqueEntry {
+            description: **d,
+            defaults: crate::technique::registry::default_config(d.id)
+                .and_then(|c| serde_json::to_value(c).ok())
+                .unwrap_or_default(),
+        })
+        .collect();
+    Json(TechniqueList {
+        techniques,
+        max_spp_per_tick: limits.max_spp_per_tick,
+        max_photon_paths: limits.max_photon_paths,
+    })
 }
 
 pub async fn create_session(

@@ -5,6 +5,13 @@
 //! A technique is driven by the engine once per tick: `update` sees what the edits changed
 //! (verify, invalidate, retrace), then `render` adds samples to the film. Per-tick calls go
 //! through `Box<dyn Technique>`; per-ray variety inside a technique is a closed `enum`.
+//!
+//! Adding a technique: its folder holds the code, its configuration and its registry
+//! `DESCRIPTION` (id, summary, spec shorthands, main parameters, test configurations). Outside
+//! it, three files change: this one (the `TechniqueConfig` and `TechniqueStats` variants and
+//! the match arms), `registry.rs` (one line in `REGISTRY`), and `proto/openapi.yaml` (the
+//! configuration's schema, which `tests/openapi.rs` checks against the registry). The spec
+//! parser, `GET /v1/techniques`, the viewer's picker and the test matrix read the registry.
 pub mod bdpt;
 pub mod box_tree;
 pub mod budget;
@@ -14,9 +21,11 @@ pub mod nee;
 pub mod particle_gi;
 pub mod path;
 pub mod photon_reuse;
+pub mod registry;
 mod spec;
 
 pub use budget::{MemoryEstimate, ResidentMemory};
+pub use registry::TECHNIQUE_IDS;
 
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -88,9 +97,6 @@ pub enum TechniqueStats {
     ParticleGi(Box<particle_gi::ParticleStats>),
 }
 
-/// The ids [`TechniqueConfig`] accepts.
-pub const TECHNIQUE_IDS: &[&str] = &["path", "photon_reuse", "bdpt", "instant_cache", "particle_gi"];
-
 impl TechniqueStats {
     /// What the technique keeps resident between ticks (its light-transport state; the film
     /// is the engine's). `path` and `bdpt` keep nothing.
@@ -145,7 +151,7 @@ impl<'de> Deserialize<'de> for TechniqueConfig {
             "bdpt" => fields_of(fields).map(TechniqueConfig::Bdpt),
             "instant_cache" => fields_of(fields).map(TechniqueConfig::InstantCache),
             "particle_gi" => fields_of(fields).map(TechniqueConfig::ParticleGi),
-            other => Err(D::Error::unknown_variant(other, TECHNIQUE_IDS)),
+            other => Err(D::Error::unknown_variant(other, &TECHNIQUE_IDS)),
         }
     }
 }

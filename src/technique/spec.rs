@@ -9,13 +9,9 @@
 use super::{TechniqueConfig, TechniqueError};
 use serde_json::{Map, Value};
 
-/// The fields a technique's `VARIANT` and `@VALUE` shorthands set.
+/// The fields a technique's `VARIANT` and `@VALUE` shorthands set (from the registry).
 fn shorthand_fields(id: &str) -> Option<(&'static str, &'static str)> {
-    match id {
-        "photon_reuse" => Some(("reuse", "threshold")),
-        "instant_cache" => Some(("mode", "vpls")),
-        _ => None,
-    }
+    super::registry::describe(id).and_then(|d| d.shorthand)
 }
 
 fn bad(message: String) -> TechniqueError {

@@ -110,19 +110,15 @@ pub fn assert_within_one_percent(label: &str, batches: &[f64], expected: f64) {
 }
 
 /// Every technique (and every instant_cache mode), small enough to run many times: the test
-/// matrix of the hard cases and the ISA tests. Covers every id in `TECHNIQUE_IDS`.
+/// matrix of the hard cases and the ISA tests, from each registry entry's `test_specs`.
 pub fn small_techniques() -> Vec<TechniqueConfig> {
-    let all = vec![
-        TechniqueConfig::Path(path(4)),
-        TechniqueConfig::from_spec("photon_reuse:paths=20000").expect("spec"),
-        TechniqueConfig::from_spec("bdpt:spp=2").expect("spec"),
-        TechniqueConfig::from_spec("instant_cache:igi").expect("spec"),
-        TechniqueConfig::from_spec("instant_cache:static").expect("spec"),
-        TechniqueConfig::from_spec("instant_cache:temporal").expect("spec"),
-        TechniqueConfig::from_spec("particle_gi:particles=4000:gather_links=8").expect("spec"),
-    ];
+    let all: Vec<TechniqueConfig> = relume::technique::registry::REGISTRY
+        .iter()
+        .flat_map(|d| d.test_specs.iter())
+        .map(|spec| TechniqueConfig::from_spec(spec).unwrap_or_else(|e| panic!("{spec}: {e}")))
+        .collect();
     for id in relume::technique::TECHNIQUE_IDS {
-        assert!(all.iter().any(|c| c.id() == *id), "the small test matrix lacks '{id}'");
+        assert!(all.iter().any(|c| c.id() == id), "the registry gives '{id}' no test configuration");
     }
     all
 }

@@ -55,6 +55,7 @@ mod vertex;
 
 use super::path::packets::trace_chunk;
 use super::path::{LanePlan, PathConfig, PathStats};
+use super::registry::{Parameter, ParameterKind, TechniqueDescription};
 use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
 use crate::core::Rng;
 use crate::film::Film;
@@ -222,3 +223,23 @@ impl BdptStats {
         }
     }
 }
+
+/// The registry's description (`technique/registry.rs`).
+pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
+    id: "bdpt",
+    summary: "Bidirectional path tracing with power-heuristic MIS and light-subpath permutation",
+    shorthand: None,
+    parameters: &[
+        Parameter {
+            name: "spp",
+            kind: ParameterKind::Integer { min: 1, max: 64 },
+            help: "camera samples per pixel per tick",
+        },
+        Parameter {
+            name: "permute",
+            kind: ParameterKind::Boolean,
+            help: "share light subpaths across pixels (Novák et al.)",
+        },
+    ],
+    test_specs: &["bdpt:spp=2"],
+};

@@ -4,6 +4,7 @@
 use super::cache::Record;
 use super::vpl::Vpl;
 use crate::technique::budget::{product_sum, size, MemoryEstimate};
+use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription};
 use crate::technique::TechniqueError;
 use serde::{Deserialize, Serialize};
 
@@ -184,3 +185,24 @@ pub struct InstantCacheStats {
     /// digests.
     pub audit_digest: u64,
 }
+
+/// The registry's description (`technique/registry.rs`).
+pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
+    id: "instant_cache",
+    summary: "Virtual point lights and an irradiance cache invalidated over time (instant radiosity with caching)",
+    shorthand: Some(("mode", "vpls")),
+    parameters: &[
+        Parameter {
+            name: "mode",
+            kind: ParameterKind::Choice { choices: &["igi", "static", "temporal"] },
+            help: "igi: no cache; static: rebuilt each tick; temporal: invalidated by change",
+        },
+        Parameter { name: "vpls", kind: ParameterKind::Integer { min: 1, max: 65536 }, help: "virtual point lights" },
+        Parameter {
+            name: "spp",
+            kind: ParameterKind::Integer { min: 1, max: 64 },
+            help: "camera samples per pixel per tick",
+        },
+    ],
+    test_specs: &["instant_cache:igi", "instant_cache:static", "instant_cache:temporal"],
+};

@@ -68,6 +68,7 @@
 //! (every VPL changes) and a moving light invalidates every VPL it shot.
 mod cache;
 mod config;
+pub use config::DESCRIPTION;
 mod igi;
 mod octree;
 mod rgbe;

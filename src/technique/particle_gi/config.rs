@@ -4,6 +4,7 @@
 use super::particles;
 use crate::scene::Scene;
 use crate::technique::budget::{product_sum, MemoryEstimate};
+use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription};
 use crate::technique::TechniqueError;
 use serde::{Deserialize, Serialize};
 
@@ -177,3 +178,23 @@ pub struct ParticleStats {
     /// `particles` (with the tessellation), `scatter_links`, `gather_links`, `lists`, `grid`.
     pub memory: crate::technique::ResidentMemory,
 }
+
+/// The registry's description (`technique/registry.rs`).
+pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
+    id: "particle_gi",
+    summary: "Area particles, scattering and gathering links, and radiance particles (Chang et al.)",
+    shorthand: None,
+    parameters: &[
+        Parameter {
+            name: "particles",
+            kind: ParameterKind::Integer { min: 100, max: 1_000_000 },
+            help: "area particles over the diffuse surfaces",
+        },
+        Parameter {
+            name: "gather_links",
+            kind: ParameterKind::Integer { min: 1, max: 32 },
+            help: "n_s of the gathering links",
+        },
+    ],
+    test_specs: &["particle_gi:particles=4000:gather_links=8"],
+};

@@ -50,6 +50,7 @@
 //! walls thinner than R only if their sides' normals agree (they do not for a two-sided
 //! wall); a scene made mostly of mirrors gets no indirect light.
 mod config;
+pub use config::DESCRIPTION;
 mod gather;
 mod lighting;
 mod links;

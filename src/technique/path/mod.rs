@@ -54,6 +54,7 @@ pub(crate) mod packets;
 
 pub use length::{max_path_length, MAX_PATH_LENGTH, MIN_PATH_LENGTH};
 
+use super::registry::{Parameter, ParameterKind, TechniqueDescription};
 use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -273,3 +274,23 @@ impl Technique for PathTracer {
         self.config.preview_filter
     }
 }
+
+/// The registry's description (`technique/registry.rs`).
+pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
+    id: "path",
+    summary: "Reference path tracer: next-event estimation with MIS, Russian roulette, packets with path regeneration",
+    shorthand: None,
+    parameters: &[
+        Parameter {
+            name: "spp",
+            kind: ParameterKind::Integer { min: 1, max: 64 },
+            help: "camera samples per pixel per tick",
+        },
+        Parameter {
+            name: "regeneration",
+            kind: ParameterKind::Boolean,
+            help: "refill finished packet lanes with new paths",
+        },
+    ],
+    test_specs: &["path:spp=4"],
+};

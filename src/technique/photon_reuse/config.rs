@@ -4,6 +4,7 @@ use super::store::{PathStore, PathWord, PhotonRow};
 use super::{grid, pixels};
 use crate::scene::Scene;
 use crate::technique::budget::{product_sum, MemoryEstimate};
+use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription};
 use crate::technique::TechniqueError;
 use serde::{Deserialize, Serialize};
 
@@ -129,3 +130,35 @@ impl PhotonReuseConfig {
         Ok(())
     }
 }
+
+/// The registry's description (`technique/registry.rs`).
+pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
+    id: "photon_reuse",
+    summary:
+        "Resident photon paths verified every tick; only the paths an edit invalidated are retraced (Moreau et al.)",
+    shorthand: Some(("reuse", "threshold")),
+    parameters: &[
+        Parameter {
+            name: "paths",
+            kind: ParameterKind::Integer { min: 1000, max: 4_000_000 },
+            help: "resident photon paths",
+        },
+        Parameter {
+            name: "reuse",
+            kind: ParameterKind::Choice { choices: &["off", "naive", "error"] },
+            help:
+                "off retraces everything; naive keeps unhit paths; error also keeps paths whose energy barely changed",
+        },
+        Parameter {
+            name: "threshold",
+            kind: ParameterKind::Number { min: 0.0, max: 1.0 },
+            help: "error mode's relative energy change T",
+        },
+        Parameter {
+            name: "spp",
+            kind: ParameterKind::Integer { min: 1, max: 64 },
+            help: "camera samples per pixel per tick",
+        },
+    ],
+    test_specs: &["photon_reuse:paths=20000"],
+};

@@ -81,6 +81,7 @@
 //! is tiny may fall back to sampling the whole light; a light that moves every tick never lets
 //! its map settle (the prune and fill then run every tick, as in the paper).
 mod config;
+pub use config::DESCRIPTION;
 mod distribution;
 mod error;
 mod gather;
