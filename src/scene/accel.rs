@@ -155,3 +155,32 @@ fn set_slot<T>(table: &mut Vec<Option<T>>, id: GeometryId, value: T) {
     }
     table[i] = Some(value);
 }
+
+/// What lies under a film position: the surface, its name, whether edits may move it, and the
+/// world point hit.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Picked {
+    /// `object` or `light`.
+    pub target: &'static str,
+    pub name: String,
+    pub dynamic: bool,
+    pub position: [f32; 3],
+}
+
+/// The surface the camera sees at film position (`x`, `y`) in pixels, as of the last commit.
+pub fn pick(scene: &Scene, accel: &SceneAccel, x: f32, y: f32) -> Option<Picked> {
+    let ray = scene.camera.ray(x, y);
+    let hit = accel.scene().intersect1(&ray)?;
+    let (surface, _) = accel.resolve(&hit)?;
+    let position = (ray.origin + ray.dir * hit.t).to_array();
+    Some(match surface {
+        SurfaceId::Object(i) => {
+            let o = scene.objects.get(i as usize)?;
+            Picked { target: "object", name: o.name.clone(), dynamic: o.dynamic, position }
+        }
+        SurfaceId::Light(i) => {
+            let l = scene.lights.get(i as usize)?;
+            Picked { target: "light", name: l.name.clone(), dynamic: l.dynamic, position }
+        }
+    })
+}

@@ -198,6 +198,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/sessions/{id}/tick", post(routes::post_tick))
         .route("/sessions/{id}/stats", get(routes::get_stats))
         .route("/sessions/{id}/snapshot", get(routes::get_snapshot))
+        .route("/sessions/{id}/pick", get(routes::pick))
         .route("/sessions/{id}/ws", get(ws::upgrade))
         .route("/sessions/{id}/{file}", get(routes::get_frame))
         .layer(middleware::from_fn_with_state(state.clone(), require_token));

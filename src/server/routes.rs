@@ -190,6 +190,36 @@ pub async fn get_scene(
     Ok(Json(entry.handle.scene().await?))
 }
 
+/// `?x=&y=` of `GET /v1/sessions/{id}/pick`: a film position in pixels.
+#[derive(serde::Deserialize)]
+pub struct PickQuery {
+    x: f32,
+    y: f32,
+}
+
+/// What lies under a pixel of the session's frame: `{"hit": false}`, or the object or light
+/// with its name, whether it can move, and the world point.
+pub async fn pick(
+    State(s): State<Shared>,
+    Path(id): Path<String>,
+    query: Result<axum::extract::Query<PickQuery>, axum::extract::rejection::QueryRejection>,
+) -> Result<Json<serde_json::Value>, ApiError> {
+    let axum::extract::Query(q) = query.map_err(|e| ApiError::invalid(format!("x, y: {}", e.body_text())))?;
+    let entry = s.session(&id)?;
+    let (w, h) = (entry.settings.width as f32, entry.settings.height as f32);
+    for (field, v, max) in [("x", q.x, w), ("y", q.y, h)] {
+        if !(v.is_finite() && (0.0..max).contains(&v)) {
+            return Err(ApiError::invalid(format!("{field}: {v} is outside the frame [0, {max})")));
+        }
+    }
+    Ok(Json(match entry.handle.pick(q.x, q.y).await? {
+        Some(p) => {
+            serde_json::json!({"hit": true, "target": p.target, "name": p.name, "dynamic": p.dynamic, "position": p.position})
+        }
+        None => serde_json::json!({"hit": false}),
+    }))
+}
+
 /// The session's snapshot (`proto/snapshot.schema.json`), to restore with `POST /v1/sessions`.
 pub async fn get_snapshot(
     State(s): State<Shared>,

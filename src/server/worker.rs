@@ -69,6 +69,12 @@ pub enum Command {
     Scene {
         reply: oneshot::Sender<Result<crate::scene::SceneDesc, ApiError>>,
     },
+    /// What the camera sees under a film position (pixels).
+    Pick {
+        x: f32,
+        y: f32,
+        reply: oneshot::Sender<Result<Option<crate::scene::accel::Picked>, ApiError>>,
+    },
     /// The scene, where the session stands, and the animation playing.
     Snapshot {
         reply: oneshot::Sender<Result<SnapshotParts, ApiError>>,
@@ -352,6 +358,13 @@ impl SessionHandle {
         answer.await.map_err(|_| gone())?
     }
 
+    /// What the camera sees at film position (`x`, `y`), as of the last tick.
+    pub async fn pick(&self, x: f32, y: f32) -> Result<Option<crate::scene::accel::Picked>, ApiError> {
+        let (reply, answer) = oneshot::channel();
+        self.send(Command::Pick { x, y, reply })?;
+        answer.await.map_err(|_| gone())?
+    }
+
     /// Makes the session's next command panic inside a turn (tests of the failure path).
     #[cfg(test)]
     pub fn inject_panic(&self) -> Result<(), ApiError> {
@@ -487,6 +500,10 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, resto
             }
             Wake::Command(Command::Scene { reply }) => {
                 let _ = reply.send(w.live().map(|l| l.session.scene().desc().clone()));
+            }
+            Wake::Command(Command::Pick { x, y, reply }) => {
+                let picked = w.live().map(|l| crate::scene::accel::pick(l.session.scene(), l.session.accel(), x, y));
+                let _ = reply.send(picked);
             }
             Wake::Command(Command::Shutdown) => break,
             #[cfg(test)]
