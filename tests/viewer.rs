@@ -1,6 +1,7 @@
 //! The viewer page in headless Chromium (Debian `chromium` + `chromium-driver`, installed by
 //! scripts/test.sh): load the page, start a session, drag an object on the image, and check that
-//! a new frame arrived and differs.
+//! a new frame arrived and differs; pick every technique of the registry and see its frames;
+//! click to select an object through the pick route; drop a .glb.
 mod common;
 use common::server::TestServer;
 use fantoccini::actions::{InputSource, MouseActions, PointerAction, MOUSE_BUTTON_LEFT};
@@ -59,10 +60,8 @@ async fn wait_for(c: &fantoccini::Client, script: &str, done: impl Fn(&Value) ->
     }
 }
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
-    let server = TestServer::start(None, Limits::default()).await;
-    let (_driver, port) = start_driver().await;
+/// A WebDriver session on headless Chromium.
+async fn browser(port: u16) -> fantoccini::Client {
     let caps = json!({
         "goog:chromeOptions": {
             "binary": CHROMIUM,
@@ -72,11 +71,18 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
         }
     });
     let connector = hyper_util::client::legacy::connect::HttpConnector::new();
-    let c = ClientBuilder::new(connector)
+    ClientBuilder::new(connector)
         .capabilities(caps.as_object().unwrap().clone())
         .connect(&format!("http://127.0.0.1:{port}"))
         .await
-        .expect("WebDriver session");
+        .expect("WebDriver session")
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
+    let server = TestServer::start(None, Limits::default()).await;
+    let (_driver, port) = start_driver().await;
+    let c = browser(port).await;
 
     c.goto(&server.url("/")).await.unwrap();
     assert_eq!(c.title().await.unwrap(), "relume viewer");
@@ -148,6 +154,134 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
         tokio::time::sleep(Duration::from_millis(100)).await;
     }
     assert_eq!(server.state.session_count(), 0, "the viewer left its session behind");
+    c.close().await.unwrap();
+    server.shutdown().await.unwrap();
+}
+
+/// Starts a session from the page and waits for two of its frames; returns its id.
+async fn start_and_wait(c: &fantoccini::Client) -> String {
+    let frames = c.execute("return window.relume.frames", vec![]).await.unwrap().as_u64().unwrap_or(0);
+    let old = c.execute("return window.relume.id", vec![]).await.unwrap();
+    c.find(Locator::Id("start")).await.unwrap().click().await.unwrap();
+    wait_for(
+        c,
+        "return [window.relume.id, window.relume.frames]",
+        |v| v[0] != old && v[1].as_u64() >= Some(frames + 2),
+        "frames",
+    )
+    .await[0]
+        .as_str()
+        .expect("session id")
+        .to_string()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb() {
+    let server = TestServer::start(None, Limits::default()).await;
+    let (_driver, port) = start_driver().await;
+    let c = browser(port).await;
+    c.goto(&server.url("/")).await.unwrap();
+    let ids = relume::technique::TECHNIQUE_IDS;
+    wait_for(
+        &c,
+        "return document.querySelectorAll('#technique option').length",
+        |v| v.as_u64() == Some(ids.len() as u64),
+        "the technique list",
+    )
+    .await;
+    c.execute(
+        "document.getElementById('scene').value = 'cornell-box'; document.getElementById('size').value = '128';",
+        vec![],
+    )
+    .await
+    .unwrap();
+    // Each technique with its parameters from the registry; small counts keep it quick.
+    let small = [("paths", "20000"), ("particles", "4000"), ("vpls", "64")];
+    for id in ids {
+        c.execute(
+            "const t = document.getElementById('technique'); t.value = arguments[0]; t.dispatchEvent(new Event('change')); \
+             for (const [k, v] of arguments[1]) { const el = document.getElementById('param-' + k); if (el) el.value = v; }",
+            vec![json!(id), json!(small)],
+        )
+        .await
+        .unwrap();
+        let session = start_and_wait(&c).await;
+        let view: Value =
+            server.http.get(server.url(&format!("/v1/sessions/{session}"))).send().await.unwrap().json().await.unwrap();
+        assert_eq!(view["technique"]["id"], *id, "{view}");
+        for (k, v) in small {
+            if !view["technique"][k].is_null() {
+                assert_eq!(view["technique"][k].to_string(), v, "{id}: the {k} control did not reach the session");
+            }
+        }
+        wait_for(&c, "return window.relume.history.length", |v| v.as_u64() >= Some(1), "ticks in the plots").await;
+    }
+    // Click to pick: walker has many moving limbs; find a pixel over one that is not selected.
+    c.execute(
+        "document.getElementById('scene').value = 'walker'; const t = document.getElementById('technique'); \
+               t.value = 'path'; t.dispatchEvent(new Event('change'));",
+        vec![],
+    )
+    .await
+    .unwrap();
+    let session = start_and_wait(&c).await;
+    let selected = c.execute("return document.getElementById('target').value", vec![]).await.unwrap();
+    let mut under = None;
+    'grid: for py in (4..128).step_by(8) {
+        for px in (4..128).step_by(8) {
+            let p: Value = server
+                .http
+                .get(server.url(&format!("/v1/sessions/{session}/pick?x={px}.5&y={py}.5")))
+                .send()
+                .await
+                .unwrap()
+                .json()
+                .await
+                .unwrap();
+            if p["dynamic"] == true && json!(format!("object/{}", p["name"].as_str().unwrap_or(""))) != selected {
+                under = Some((px, py, p["name"].as_str().unwrap().to_string()));
+                break 'grid;
+            }
+        }
+    }
+    let (px, py, name) = under.expect("a moving limb in view");
+    let img = c.find(Locator::Id("frame")).await.unwrap();
+    let scale =
+        c.execute("return document.getElementById('frame').clientWidth / 128", vec![]).await.unwrap().as_f64().unwrap();
+    let (dx, dy) =
+        (((px as f64 + 0.5) * scale - 64.0 * scale) as i64, ((py as f64 + 0.5) * scale - 64.0 * scale) as i64);
+    let click = MouseActions::new("mouse".into())
+        .then(PointerAction::MoveToElement { element: img, duration: None, x: dx, y: dy })
+        .then(PointerAction::Down { button: MOUSE_BUTTON_LEFT })
+        .then(PointerAction::Up { button: MOUSE_BUTTON_LEFT });
+    c.perform_actions(click).await.unwrap();
+    let want = json!(format!("object/{name}"));
+    wait_for(&c, "return document.getElementById('target').value", |v| *v == want, "the clicked limb selected").await;
+    // Drop a .glb: the page starts a session on it (inline) and frames arrive.
+    let glb = std::fs::read(common::scenes_dir().join("cornell-box.glb")).unwrap();
+    let b64 = base64::Engine::encode(&base64::engine::general_purpose::STANDARD, glb);
+    let before = c.execute("return window.relume.id", vec![]).await.unwrap();
+    c.execute(
+        "const b = atob(arguments[0]); const u = new Uint8Array(b.length); for (let i = 0; i < b.length; i++) u[i] = b.charCodeAt(i); \
+         window.relume.startFile(new File([u], 'cornell-box.glb'));",
+        vec![json!(b64)],
+    )
+    .await
+    .unwrap();
+    let dropped = wait_for(
+        &c,
+        "return [window.relume.id, window.relume.frames]",
+        |v| v[0] != before && !v[0].is_null(),
+        "the dropped scene's session",
+    )
+    .await;
+    let id = dropped[0].as_str().unwrap();
+    let view: Value =
+        server.http.get(server.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(view["scene"], "inline", "{view}");
+    let frames = dropped[1].as_u64().unwrap();
+    wait_for(&c, "return window.relume.frames", |v| v.as_u64() >= Some(frames + 2), "frames of the dropped scene")
+        .await;
     c.close().await.unwrap();
     server.shutdown().await.unwrap();
 }

@@ -148,6 +148,9 @@ pub struct SessionView {
     /// The scene's load report: what a glTF file holds that relume reads only in part.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
+    /// A glTF scene's own animations, which `play` takes by name.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub animations: Vec<String>,
     pub links: SessionLinks,
 }
 

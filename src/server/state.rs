@@ -446,6 +446,7 @@ pub fn view(e: &SessionEntry) -> SessionView {
         failure,
         last_stats,
         warnings: e.warnings.clone(),
+        animations: e.animations.iter().map(|(name, _)| name.clone()).collect(),
         links: links(&e.id),
     }
 }

@@ -1,9 +1,11 @@
-// relume viewer: start a session, watch frames over the WebSocket, move objects and lights,
-// play the scene's animation. Plain JS, no build step. ?token=... is passed to the API.
+// relume viewer: start a session with any technique (the server's registry, GET
+// /v1/techniques), or on a dropped .glb; watch frames over the WebSocket with per-tick plots;
+// click to pick an object or light (GET .../pick), drag to move it; play the scene's
+// animation. Plain JS, no build step. ?token=... is passed to the API.
 "use strict";
 const $ = (id) => document.getElementById(id);
 const token = new URLSearchParams(location.search).get("token");
-const state = { id: null, ws: null, scene: null, frames: 0, lastUrl: null, extent: 1, pending: null };
+const state = { id: null, ws: null, scene: null, frames: 0, lastUrl: null, extent: 1, pending: null, history: [] };
 window.relume = state; // for tests and curious people
 
 function api(path, options = {}) {
@@ -24,6 +26,42 @@ async function loadScenes() {
   $("scene").innerHTML = scenes.map((s) => `<option>${s.name}</option>`).join("");
   const preferred = scenes.find((s) => s.name === "merry-go-round") || scenes[0];
   if (preferred) $("scene").value = preferred.name;
+}
+
+// The technique picker and each technique's main parameters, from the server's registry.
+async function loadTechniques() {
+  const list = await api("/v1/techniques");
+  state.techniques = list.techniques;
+  state.limits = list;
+  $("technique").innerHTML = list.techniques.map((t) => `<option value="${t.id}" title="${t.summary}">${t.id}</option>`).join("");
+  $("technique").value = "path";
+  showParams();
+}
+
+function control(p, value) {
+  const attrs = `id="param-${p.name}" data-param="${p.name}" data-type="${p.type}"`;
+  if (p.type === "choice") {
+    const options = p.choices.map((c) => `<option${c === String(value) ? " selected" : ""}>${c}</option>`).join("");
+    return `<label title="${p.help}">${p.name} <select ${attrs}>${options}</select></label>`;
+  }
+  if (p.type === "boolean") return `<label title="${p.help}"><input ${attrs} type="checkbox"${value ? " checked" : ""}> ${p.name}</label>`;
+  const max = p.name === "spp" ? Math.min(p.max, state.limits.max_spp_per_tick) : p.max;
+  const step = p.type === "integer" ? 1 : "any";
+  return `<label title="${p.help}">${p.name} <input ${attrs} type="number" min="${p.min}" max="${max}" step="${step}" value="${value}"></label>`;
+}
+
+function showParams() {
+  const t = state.techniques.find((x) => x.id === $("technique").value);
+  $("params").innerHTML = t ? t.parameters.map((p) => control(p, t.defaults[p.name])).join("") : "";
+}
+
+function techniqueConfig() {
+  const config = { id: $("technique").value };
+  for (const el of document.querySelectorAll("[data-param]")) {
+    const type = el.dataset.type;
+    config[el.dataset.param] = type === "boolean" ? el.checked : type === "choice" ? el.value : Number(el.value);
+  }
+  return config;
 }
 
 // Every movable target: dynamic objects and lights, with their current transforms.
@@ -72,12 +110,16 @@ function scheduleMove() {
 }
 
 function showStats(s, dropped) {
+  state.history.push(s);
+  if (state.history.length > 120) state.history.shift();
+  drawPlots();
   const rows = [
     ["tick", s.tick], ["spp", s.spp], ["accumulation", s.accumulation_id],
     ["tick time (ms)", s.times.total_ms.toFixed(1)],
     ["rays primary", s.rays.primary], ["rays secondary", s.rays.secondary], ["rays shadow", s.rays.shadow],
     ["edits received / coalesced / unchanged", `${s.edits_received} / ${s.edits_coalesced} / ${s.edits_unchanged}`],
     ["frames dropped", dropped],
+    ["edits applied through (seq)", s.edits_applied_through],
     ["resident memory (MiB)", (s.detail.memory.total_bytes / 1048576).toFixed(1)],
   ];
   $("stats").tBodies[0].innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
@@ -86,6 +128,43 @@ function showStats(s, dropped) {
   $("stages").innerHTML = stages
     .map((k) => `<div class="bar" style="width:${Math.max(1, (100 * s.times[k]) / total)}%">${k.replace("_ms", "")} ${s.times[k].toFixed(2)} ms</div>`)
     .join("");
+}
+
+const STAGES = [["apply_ms", "#a78bfa"], ["commit_ms", "#f59e0b"], ["update_ms", "#ef4444"], ["render_ms", "#3b82f6"], ["resolve_ms", "#10b981"], ["denoise_ms", "#ec4899"]];
+const RAYS = [["primary", "#3b82f6"], ["secondary", "#f59e0b"], ["shadow", "#9ca3af"]];
+
+// Stacked columns, one per tick (newest right), scaled to the tallest.
+function stacked(canvas, series) {
+  const g = canvas.getContext("2d");
+  const { width: w, height: h } = canvas;
+  g.clearRect(0, 0, w, h);
+  const n = state.history.length;
+  const totals = state.history.map((_, i) => series.reduce((a, s) => a + s.values[i], 0));
+  const top = Math.max(...totals, 1e-9);
+  const bar = w / 120;
+  state.history.forEach((_, i) => {
+    let y = h;
+    for (const s of series) {
+      const dh = (s.values[i] / top) * (h - 12);
+      g.fillStyle = s.color;
+      g.fillRect(w - (n - i) * bar, y - dh, Math.max(1, bar - 1), dh);
+      y -= dh;
+    }
+  });
+  g.fillStyle = "#9aa0a6";
+  g.font = "10px system-ui";
+  g.fillText(`max ${top.toPrecision(3)}`, 2, 10);
+}
+
+function drawPlots() {
+  const h = state.history;
+  stacked($("plot-stages"), STAGES.map(([k, color]) => ({ color, values: h.map((s) => s.times[k] || 0) })));
+  stacked($("plot-rays"), RAYS.map(([k, color]) => ({ color, values: h.map((s) => s.rays[k]) })));
+  stacked($("plot-spp"), [{ color: "#10b981", values: h.map((s) => s.spp) }]);
+  if (!$("legend").childElementCount) {
+    $("legend").innerHTML = [...STAGES, ...RAYS]
+      .map(([k, c]) => `<span><i style="background:${c}"></i>${k.replace("_ms", "")}</span>`).join("");
+  }
 }
 
 function showFrame(buffer) {
@@ -111,15 +190,15 @@ function showFrame(buffer) {
   document.body.dataset.frames = String(state.frames);
 }
 
-async function start() {
+// Starts a session on the picked scene, or on a glTF file (base64) when given one.
+async function start(glb) {
   if (state.ws) state.ws.close();
   if (state.id) api(`/v1/sessions/${state.id}`, { method: "DELETE" }).catch(() => {});
+  state.history = [];
   const size = Number($("size").value);
-  const body = {
-    scene: $("scene").value,
-    technique: { id: $("technique").value, spp: Number($("spp").value) },
-    width: size, height: size, tick_hz: Number($("hz").value),
-  };
+  const body = { technique: techniqueConfig(), width: size, height: size, tick_hz: Number($("hz").value) };
+  if (glb) body.scene_glb = glb;
+  else body.scene = $("scene").value;
   if ($("denoise").value) body.denoise = { quality: $("denoise").value };
   status("starting…");
   try {
@@ -130,10 +209,11 @@ async function start() {
     state.extent = Math.hypot(c.position[0] - c.look_at[0], c.position[1] - c.look_at[1], c.position[2] - c.look_at[2]) * 0.6;
     $("target").innerHTML = targets().map((t) => `<option value="${t.kind}/${t.name}">${t.kind} ${t.name}</option>`).join("");
     setSliders();
-    const entry = state.scenes.find((x) => x.name === $("scene").value);
-    $("animation").innerHTML = (entry ? entry.animations : []).map((a) => `<option>${a}</option>`).join("");
+    const entry = glb ? null : state.scenes.find((x) => x.name === $("scene").value);
+    const animations = (s.animations || []).length ? s.animations : entry ? entry.animations : [];
+    $("animation").innerHTML = animations.map((a) => `<option>${a}</option>`).join("");
     connect(s.id);
-    status(`session ${s.id}`);
+    status(`session ${s.id}` + (s.warnings ? ` — ${s.warnings.length} load warning(s): ${s.warnings.join("; ")}` : ""));
   } catch (e) {
     status("error: " + e.message);
   }
@@ -161,13 +241,70 @@ function connect(id) {
   state.ws = ws;
 }
 
+// Selects what the camera sees under the pointer (GET .../pick); a static surface is named
+// but cannot be moved, so the selection stays.
+async function pickAt(e) {
+  if (!state.id || !state.scene) return;
+  const img = $("frame");
+  const c = state.scene.camera;
+  const x = (e.offsetX / img.clientWidth) * c.resolution[0];
+  const y = (e.offsetY / img.clientHeight) * c.resolution[1];
+  try {
+    const p = await api(`/v1/sessions/${state.id}/pick?x=${x.toFixed(2)}&y=${y.toFixed(2)}`);
+    state.picked = p;
+    if (!p.hit) return;
+    if (p.dynamic) {
+      $("target").value = `${p.target}/${p.name}`;
+      setSliders();
+      status(`selected ${p.target} ${p.name}`);
+    } else {
+      status(`${p.target} ${p.name} is static`);
+    }
+  } catch (err) {
+    status("pick: " + err.message);
+  }
+}
+
+function toBase64(buffer) {
+  const bytes = new Uint8Array(buffer);
+  let text = "";
+  for (let i = 0; i < bytes.length; i += 0x8000) text += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
+  return btoa(text);
+}
+
+// A .glb (or self-contained .gltf) dropped on the page or chosen starts a session on it.
+async function startFile(file) {
+  if (!file) return;
+  status(`reading ${file.name}…`);
+  await start(toBase64(await file.arrayBuffer()));
+}
+state.startFile = startFile; // for tests
+
+function installDrop() {
+  document.addEventListener("dragover", (e) => { e.preventDefault(); document.body.classList.add("dropping"); });
+  document.addEventListener("dragleave", () => document.body.classList.remove("dropping"));
+  document.addEventListener("drop", (e) => {
+    e.preventDefault();
+    document.body.classList.remove("dropping");
+    startFile(e.dataTransfer.files[0]);
+  });
+  $("glb").addEventListener("change", () => startFile($("glb").files[0]));
+}
+
 // Dragging on the image moves the selected target over the ground plane, in camera-relative
 // directions: right along the camera's right, up along its forward (both projected to XZ).
 function installDrag() {
   const img = $("frame");
   let last = null;
-  img.addEventListener("pointerdown", (e) => { last = [e.clientX, e.clientY]; img.classList.add("dragging"); img.setPointerCapture(e.pointerId); });
-  img.addEventListener("pointerup", () => { last = null; img.classList.remove("dragging"); });
+  let down = false;
+  img.addEventListener("pointerdown", async (e) => {
+    down = true;
+    img.setPointerCapture(e.pointerId);
+    img.classList.add("dragging");
+    await pickAt(e);
+    if (down) last = [e.clientX, e.clientY];
+  });
+  img.addEventListener("pointerup", () => { down = false; last = null; img.classList.remove("dragging"); });
   img.addEventListener("pointermove", (e) => {
     if (!last || !state.scene) return;
     const [dx, dy] = [e.clientX - last[0], e.clientY - last[1]];
@@ -184,7 +321,8 @@ function installDrag() {
   });
 }
 
-$("start").addEventListener("click", start);
+$("start").addEventListener("click", () => start());
+$("technique").addEventListener("change", showParams);
 $("raw").addEventListener("change", subscribe);
 // Leaving the page deletes its session rather than leaving it to the server's idle expiry.
 window.addEventListener("pagehide", () => {
@@ -195,4 +333,5 @@ $("target").addEventListener("change", setSliders);
 $("play").addEventListener("click", () => state.ws && state.ws.send(JSON.stringify({ type: "play", anim: $("animation").value, speed: 1 })));
 $("pause").addEventListener("click", () => state.ws && state.ws.send(JSON.stringify({ type: "pause" })));
 installDrag();
-loadScenes().catch((e) => status("error: " + e.message));
+installDrop();
+Promise.all([loadScenes(), loadTechniques()]).catch((e) => status("error: " + e.message));
