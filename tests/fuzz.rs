@@ -150,6 +150,39 @@ fn scene_documents_are_accepted_or_refused_by_field() {
         .unwrap();
 }
 
+/// A bundled `.glb` as one self-contained glTF JSON document (its binary chunk a `data:` URI).
+fn gltf_seed(name: &str) -> Value {
+    use base64::Engine;
+    let glb = std::fs::read(common::scenes_dir().join(name)).expect("bundled glb");
+    let json_len = u32::from_le_bytes(glb[12..16].try_into().expect("GLB header")) as usize;
+    let mut doc: Value = serde_json::from_slice(&glb[20..20 + json_len]).expect("JSON chunk");
+    let bin = base64::engine::general_purpose::STANDARD.encode(&glb[28 + json_len..]);
+    doc["buffers"][0]["uri"] = json!(format!("data:application/octet-stream;base64,{bin}"));
+    doc
+}
+
+#[test]
+fn gltf_documents_are_accepted_or_refused_by_field() {
+    // glTF import over mutated documents: every node, material, light, camera, accessor and
+    // animation field of real exports. Each is read (and builds within the budget) or refused
+    // with an error naming its part; none panics.
+    let root = common::scenes_dir();
+    let seeds: Vec<Value> =
+        ["cornell-box.glb", "walker.glb", "villa-torch.glb", "maze.glb"].iter().map(|n| gltf_seed(n)).collect();
+    let options =
+        relume::scene::gltf::ImportOptions { budget: BUDGET, max_buffer_bytes: 1 << 20, ..Default::default() };
+    runner(300)
+        .run(&mutated(seeds), |doc| {
+            match relume::scene::gltf::import_slice(doc.to_string().as_bytes(), None, &options) {
+                Ok(imported) => {
+                    Scene::from_desc_within(imported.desc, &root, &root, &BUDGET).map(|_| ()).or_else(names_a_field)
+                }
+                Err(e) => names_a_field(e),
+            }
+        })
+        .unwrap();
+}
+
 #[test]
 fn edits_and_websocket_messages_are_accepted_or_refused_by_field() {
     let mut scene = common::load("bunnies-1.json");

@@ -109,10 +109,18 @@ pub fn import_slice(
     if !(options.scale.is_finite() && options.scale > 0.0) {
         return Err(invalid("scale", format!("{} is not a positive finite number", options.scale)));
     }
-    let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid("gltf", e.to_string()))?;
-    let gltf::Gltf { document, blob } = gltf;
-    let buffers = buffers::load(&document, blob, files, options.max_buffer_bytes)?;
-    convert(&document, &buffers, options)
+    // gltf-json 1.4.1's validation indexes some arrays before checking the index (a POSITION
+    // accessor out of range panics), and hostile documents must cost nothing: a panic in the
+    // parser or in reading its data is a refusal of the document.
+    let read = std::panic::AssertUnwindSafe(|| -> Result<Imported, SceneError> {
+        let gltf = gltf::Gltf::from_slice(bytes).map_err(|e| invalid("gltf", e.to_string()))?;
+        let gltf::Gltf { document, blob } = gltf;
+        let buffers = buffers::load(&document, blob, files, options.max_buffer_bytes)?;
+        convert(&document, &buffers, options)
+    });
+    std::panic::catch_unwind(read).unwrap_or_else(|_| {
+        Err(invalid("gltf", "malformed document: an index points outside its array (the glTF parser failed on it)"))
+    })
 }
 
 fn convert(doc: &gltf::Document, buffers: &[Vec<u8>], options: &ImportOptions) -> Result<Imported, SceneError> {
