@@ -472,6 +472,12 @@ fn bad_files_are_refused_naming_the_part() {
         ("cycle", Box::new(|d: &mut Value| d["nodes"][1]["children"] = json!([1])), "nodes[1]"),
         ("short buffer", Box::new(|d: &mut Value| d["buffers"][0]["byteLength"] = json!(1 << 20)), "buffers[0]"),
         ("file buffer inline", Box::new(|d: &mut Value| d["buffers"][0]["uri"] = json!("mesh.bin")), "buffers[0].uri"),
+        // gltf-json's own validation indexes this accessor before checking it (it panics).
+        (
+            "accessor out of range",
+            Box::new(|d: &mut Value| d["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(99)),
+            "gltf",
+        ),
         (
             "no scene",
             Box::new(|d: &mut Value| {
