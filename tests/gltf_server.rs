@@ -16,7 +16,7 @@ async fn connect(s: &TestServer, id: &str) -> common::ws::Socket {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bundled_glb_scenes_are_listed_created_and_play_their_animations() {
     let s = TestServer::start(None, Limits::default()).await;
-    let list: Value = s.http.get(s.url("/v1/scenes")).send().await.unwrap().json().await.unwrap();
+    let list = s.get_json("/v1/scenes").await;
     let walker = list["scenes"].as_array().unwrap().iter().find(|e| e["name"] == "walker.glb").cloned();
     assert_eq!(walker.expect("walker.glb listed")["animations"], json!(["walker"]), "{list}");
     let id = s.session(json!({"scene": "walker.glb", "width": 16, "height": 16})).await;
@@ -69,16 +69,7 @@ async fn an_inline_glb_creates_a_session_and_returns_its_load_report() {
         base64::engine::general_purpose::STANDARD.encode(bin)
     ));
     let body = base64::engine::general_purpose::STANDARD.encode(serde_json::to_vec(&doc).unwrap());
-    let v: Value = s
-        .http
-        .post(s.url("/v1/sessions"))
-        .json(&json!({"scene_glb": body, "width": 16, "height": 16}))
-        .send()
-        .await
-        .unwrap()
-        .json()
-        .await
-        .unwrap();
+    let v = s.post_json("/v1/sessions", &json!({"scene_glb": body, "width": 16, "height": 16})).await;
     let warnings = v["warnings"].to_string();
     assert!(warnings.contains("base colour textures") && warnings.contains("materials[0]"), "{v}");
     s.shutdown().await.unwrap();

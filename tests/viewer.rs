@@ -128,8 +128,7 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
     // The session's scene (not a frame of another tick, whose noise differs anyway) shows the
     // bunny somewhere else than the bundled scene puts it.
     let id = after[0].as_str().expect("the viewer's session id");
-    let view: Value =
-        server.http.get(server.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    let view = server.get_json(&format!("/v1/sessions/{id}")).await;
     assert_eq!(view["denoise"]["quality"], "fast", "the viewer's denoise choice did not reach the session");
     let scene: Value =
         server.http.get(server.url(&format!("/v1/sessions/{id}/scene"))).send().await.unwrap().json().await.unwrap();
@@ -206,8 +205,7 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
         .await
         .unwrap();
         let session = start_and_wait(&c).await;
-        let view: Value =
-            server.http.get(server.url(&format!("/v1/sessions/{session}"))).send().await.unwrap().json().await.unwrap();
+        let view = server.get_json(&format!("/v1/sessions/{session}")).await;
         assert_eq!(view["technique"]["id"], *id, "{view}");
         for (k, v) in small {
             if !view["technique"][k].is_null() {
@@ -229,15 +227,7 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
     let mut under = None;
     'grid: for py in (4..128).step_by(8) {
         for px in (4..128).step_by(8) {
-            let p: Value = server
-                .http
-                .get(server.url(&format!("/v1/sessions/{session}/pick?x={px}.5&y={py}.5")))
-                .send()
-                .await
-                .unwrap()
-                .json()
-                .await
-                .unwrap();
+            let p = server.get_json(&format!("/v1/sessions/{session}/pick?x={px}.5&y={py}.5")).await;
             if p["dynamic"] == true && json!(format!("object/{}", p["name"].as_str().unwrap_or(""))) != selected {
                 under = Some((px, py, p["name"].as_str().unwrap().to_string()));
                 break 'grid;
@@ -276,8 +266,7 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
     )
     .await;
     let id = dropped[0].as_str().unwrap();
-    let view: Value =
-        server.http.get(server.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    let view = server.get_json(&format!("/v1/sessions/{id}")).await;
     assert_eq!(view["scene"], "inline", "{view}");
     let frames = dropped[1].as_u64().unwrap();
     wait_for(&c, "return window.relume.frames", |v| v.as_u64() >= Some(frames + 2), "frames of the dropped scene")

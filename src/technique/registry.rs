@@ -42,6 +42,13 @@ pub struct TechniqueDescription {
     pub test_specs: &'static [&'static str],
 }
 
+/// Camera samples per pixel per tick: a main parameter of every technique that has it.
+pub const SPP: Parameter = Parameter {
+    name: "spp",
+    kind: ParameterKind::Integer { min: 1, max: 64 },
+    help: "camera samples per pixel per tick",
+};
+
 /// Every technique, in the order the viewer lists them.
 pub const REGISTRY: &[&TechniqueDescription] = &[
     &super::path::DESCRIPTION,

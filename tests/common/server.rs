@@ -65,6 +65,16 @@ impl TestServer {
         format!("ws://{}{path}", self.addr)
     }
 
+    /// `GET path` as JSON (any status).
+    pub async fn get_json(&self, path: &str) -> serde_json::Value {
+        self.http.get(self.url(path)).send().await.unwrap().json().await.unwrap()
+    }
+
+    /// `POST path` with a JSON body, answered as JSON (any status).
+    pub async fn post_json(&self, path: &str, body: &serde_json::Value) -> serde_json::Value {
+        self.http.post(self.url(path)).json(body).send().await.unwrap().json().await.unwrap()
+    }
+
     /// Creates a session and returns its id.
     pub async fn session(&self, body: serde_json::Value) -> String {
         let r = self.http.post(self.url("/v1/sessions")).json(&body).send().await.unwrap();

@@ -55,7 +55,7 @@ mod vertex;
 
 use super::path::packets::trace_chunk;
 use super::path::{LanePlan, PathConfig, PathStats};
-use super::registry::{Parameter, ParameterKind, TechniqueDescription};
+use super::registry::{Parameter, ParameterKind, TechniqueDescription, SPP};
 use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
 use crate::core::Rng;
 use crate::film::Film;
@@ -230,11 +230,7 @@ pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
     summary: "Bidirectional path tracing with power-heuristic MIS and light-subpath permutation",
     shorthand: None,
     parameters: &[
-        Parameter {
-            name: "spp",
-            kind: ParameterKind::Integer { min: 1, max: 64 },
-            help: "camera samples per pixel per tick",
-        },
+        SPP,
         Parameter {
             name: "permute",
             kind: ParameterKind::Boolean,

@@ -4,7 +4,7 @@
 use super::cache::Record;
 use super::vpl::Vpl;
 use crate::technique::budget::{product_sum, size, MemoryEstimate};
-use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription};
+use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription, SPP};
 use crate::technique::TechniqueError;
 use serde::{Deserialize, Serialize};
 
@@ -198,11 +198,7 @@ pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
             help: "igi: no cache; static: rebuilt each tick; temporal: invalidated by change",
         },
         Parameter { name: "vpls", kind: ParameterKind::Integer { min: 1, max: 65536 }, help: "virtual point lights" },
-        Parameter {
-            name: "spp",
-            kind: ParameterKind::Integer { min: 1, max: 64 },
-            help: "camera samples per pixel per tick",
-        },
+        SPP,
     ],
     test_specs: &["instant_cache:igi", "instant_cache:static", "instant_cache:temporal"],
 };

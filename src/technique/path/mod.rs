@@ -54,7 +54,7 @@ pub(crate) mod packets;
 
 pub use length::{max_path_length, MAX_PATH_LENGTH, MIN_PATH_LENGTH};
 
-use super::registry::{Parameter, ParameterKind, TechniqueDescription};
+use super::registry::{Parameter, ParameterKind, TechniqueDescription, SPP};
 use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -281,11 +281,7 @@ pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
     summary: "Reference path tracer: next-event estimation with MIS, Russian roulette, packets with path regeneration",
     shorthand: None,
     parameters: &[
-        Parameter {
-            name: "spp",
-            kind: ParameterKind::Integer { min: 1, max: 64 },
-            help: "camera samples per pixel per tick",
-        },
+        SPP,
         Parameter {
             name: "regeneration",
             kind: ParameterKind::Boolean,

@@ -4,7 +4,7 @@ use super::store::{PathStore, PathWord, PhotonRow};
 use super::{grid, pixels};
 use crate::scene::Scene;
 use crate::technique::budget::{product_sum, MemoryEstimate};
-use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription};
+use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription, SPP};
 use crate::technique::TechniqueError;
 use serde::{Deserialize, Serialize};
 
@@ -154,11 +154,7 @@ pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
             kind: ParameterKind::Number { min: 0.0, max: 1.0 },
             help: "error mode's relative energy change T",
         },
-        Parameter {
-            name: "spp",
-            kind: ParameterKind::Integer { min: 1, max: 64 },
-            help: "camera samples per pixel per tick",
-        },
+        SPP,
     ],
     test_specs: &["photon_reuse:paths=20000"],
 };
