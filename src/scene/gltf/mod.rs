@@ -28,8 +28,6 @@ mod warnings;
 
 pub use buffers::FileContext;
 pub use export::export_glb;
-pub use import::LUMENS_PER_WATT;
-pub use materials::MIRROR_ROUGHNESS;
 
 use super::animation::Animation;
 use super::load::{invalid, SceneBudget, SceneError};
