@@ -157,21 +157,21 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
     server.shutdown().await.unwrap();
 }
 
-/// Starts a session from the page and waits for two of its frames; returns its id.
+/// Starts a session from the page and waits for two frames that arrived after its id did (the
+/// previous session's last frames do not count); returns its id.
 async fn start_and_wait(c: &fantoccini::Client) -> String {
-    let frames = c.execute("return window.relume.frames", vec![]).await.unwrap().as_u64().unwrap_or(0);
     let old = c.execute("return window.relume.id", vec![]).await.unwrap();
     c.find(Locator::Id("start")).await.unwrap().click().await.unwrap();
-    wait_for(
+    let started = wait_for(
         c,
         "return [window.relume.id, window.relume.frames]",
-        |v| v[0] != old && v[1].as_u64() >= Some(frames + 2),
-        "frames",
+        |v| v[0] != old && !v[0].is_null(),
+        "the new session",
     )
-    .await[0]
-        .as_str()
-        .expect("session id")
-        .to_string()
+    .await;
+    let frames = started[1].as_u64().unwrap_or(0);
+    wait_for(c, "return window.relume.frames", |v| v.as_u64() >= Some(frames + 2), "its frames").await;
+    started[0].as_str().expect("session id").to_string()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -214,19 +214,21 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
         }
         wait_for(&c, "return window.relume.history.length", |v| v.as_u64() >= Some(1), "ticks in the plots").await;
     }
-    // Click to pick: walker has many moving limbs; find a pixel over one that is not selected.
+    // Click to pick: bunnies-2 has two moving bunnies; find a pixel over the one not selected.
     c.execute(
-        "document.getElementById('scene').value = 'walker'; const t = document.getElementById('technique'); \
+        "document.getElementById('scene').value = 'bunnies-2'; const t = document.getElementById('technique'); \
                t.value = 'path'; t.dispatchEvent(new Event('change'));",
         vec![],
     )
     .await
     .unwrap();
     let session = start_and_wait(&c).await;
+    let view = server.get_json(&format!("/v1/sessions/{session}")).await;
+    assert_eq!((view["scene"].as_str(), view["width"].as_u64()), (Some("bunnies-2"), Some(128)), "{view}");
     let selected = c.execute("return document.getElementById('target').value", vec![]).await.unwrap();
     let mut under = None;
-    'grid: for py in (4..128).step_by(8) {
-        for px in (4..128).step_by(8) {
+    'grid: for py in (2..128).step_by(4) {
+        for px in (2..128).step_by(4) {
             let p = server.get_json(&format!("/v1/sessions/{session}/pick?x={px}.5&y={py}.5")).await;
             if p["dynamic"] == true && json!(format!("object/{}", p["name"].as_str().unwrap_or(""))) != selected {
                 under = Some((px, py, p["name"].as_str().unwrap().to_string()));
@@ -234,7 +236,7 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
             }
         }
     }
-    let (px, py, name) = under.expect("a moving limb in view");
+    let (px, py, name) = under.expect("the other bunny in view");
     let img = c.find(Locator::Id("frame")).await.unwrap();
     let scale =
         c.execute("return document.getElementById('frame').clientWidth / 128", vec![]).await.unwrap().as_f64().unwrap();
@@ -246,7 +248,7 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
         .then(PointerAction::Up { button: MOUSE_BUTTON_LEFT });
     c.perform_actions(click).await.unwrap();
     let want = json!(format!("object/{name}"));
-    wait_for(&c, "return document.getElementById('target').value", |v| *v == want, "the clicked limb selected").await;
+    wait_for(&c, "return document.getElementById('target').value", |v| *v == want, "the clicked bunny selected").await;
     // Drop a .glb: the page starts a session on it (inline) and frames arrive.
     let glb = std::fs::read(common::scenes_dir().join("cornell-box.glb")).unwrap();
     let b64 = base64::Engine::encode(&base64::engine::general_purpose::STANDARD, glb);
