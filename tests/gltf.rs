@@ -359,6 +359,12 @@ fn punctual_lights_and_the_camera_read_in_relume_units() {
 /// An animation on node 0 (a parent) and node 1 (its child with the mesh), one channel per
 /// interpolation mode.
 fn animated_doc() -> Vec<u8> {
+    animated_doc_with(true)
+}
+
+/// [`animated_doc`], or (`cubic: false`, a negative control) with the scale channel a LINEAR
+/// line between the same two key values.
+fn animated_doc_with(cubic: bool) -> Vec<u8> {
     let mut doc = Doc::default();
     let mesh = doc.triangle(None);
     let t_lin = doc.floats(&[0.0, 2.0], "SCALAR");
@@ -367,8 +373,12 @@ fn animated_doc() -> Vec<u8> {
     let v_step = doc.floats(&[0.0, 0.0, 0.0, 0.0, 5.0, 0.0], "VEC3");
     let t_cub = doc.floats(&[0.0, 2.0], "SCALAR");
     // (in-tangent, value, out-tangent) per key: a scale from 1 to 3 with zero tangents.
-    let v_cub =
-        doc.floats(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3.0, 3.0, 3.0, 0.0, 0.0, 0.0], "VEC3");
+    let v_cub = if cubic {
+        doc.floats(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3.0, 3.0, 3.0, 0.0, 0.0, 0.0], "VEC3")
+    } else {
+        doc.floats(&[1.0, 1.0, 1.0, 3.0, 3.0, 3.0], "VEC3")
+    };
+    let cubic_mode = if cubic { "CUBICSPLINE" } else { "LINEAR" };
     doc.finish(json!({
         "scene": 0, "scenes": [{"nodes": [0]}], "meshes": [mesh],
         "nodes": [{"name": "rig", "children": [1]}, {"name": "body", "mesh": 0}],
@@ -376,7 +386,7 @@ fn animated_doc() -> Vec<u8> {
             "samplers": [
                 {"input": t_lin, "output": v_lin, "interpolation": "LINEAR"},
                 {"input": t_step, "output": v_step, "interpolation": "STEP"},
-                {"input": t_cub, "output": v_cub, "interpolation": "CUBICSPLINE"},
+                {"input": t_cub, "output": v_cub, "interpolation": cubic_mode},
             ],
             "channels": [
                 {"sampler": 0, "target": {"node": 0, "path": "translation"}},
@@ -400,10 +410,27 @@ fn animations_read_linear_step_and_cubic_channels_through_the_hierarchy() {
     };
     // glTF's own definitions, evaluated by hand: LINEAR x = 2t, STEP y = 5 from t = 1,
     // CUBICSPLINE scale 1 + 2(3s² − 2s³) with s = t/2 and zero tangents.
-    for t in [0.25f32, 0.5, 0.99, 1.01, 1.5, 1.95] {
-        let got = pose(t);
+    let cubic_scale = |t: f32| {
         let s = t / 2.0;
-        let scale = 1.0 + 2.0 * (3.0 * s * s - 2.0 * s * s * s);
+        1.0 + 2.0 * (3.0 * s * s - 2.0 * s * s * s)
+    };
+    let times = [0.25f32, 0.5, 0.99, 1.01, 1.5, 1.95];
+    // Negative control for the cubic tolerance: the same keys joined by a straight line miss
+    // the Hermite curve by more than it.
+    let line = import(&animated_doc_with(false)).expect("import");
+    let line_anim = line.animation("walk").expect("walk");
+    let worst_line = times
+        .iter()
+        .map(|&t| {
+            let edits = line_anim.edits_at(t);
+            let Some(Edit::Object { transform, .. }) = edits.first() else { panic!("an object edit") };
+            (transform.scale[0] - cubic_scale(t)).abs()
+        })
+        .fold(0.0f32, f32::max);
+    assert!(worst_line > 0.02, "a LINEAR scale channel passes the cubic tolerance ({worst_line})");
+    for t in times {
+        let got = pose(t);
+        let scale = cubic_scale(t);
         let y = if t < 1.0 { 0.0 } else { 5.0 };
         assert!((got.translation[0] - 2.0 * t).abs() < 1e-4, "t {t}: x {}", got.translation[0]);
         assert!((got.translation[1] - y).abs() < 1e-4, "t {t}: y {}", got.translation[1]);
