@@ -187,7 +187,12 @@ fn bench_rays_reports_rates_and_regeneration_rows() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("regeneration (PR) vs none (NO)"));
     let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
-    assert!(v["raw"]["incoherent_closest_mrays"].as_f64().unwrap() > 0.0);
+    let raw = v["raw"].as_array().unwrap();
+    assert_eq!(raw[0]["accel"], "default", "the default layout comes first");
+    for accel in ["nested", "flat", "frozen"] {
+        assert!(raw.iter().any(|r| r["accel"] == accel), "{accel} measured");
+    }
+    assert!(raw.iter().all(|r| r["incoherent_closest_mrays"].as_f64().unwrap() > 0.0));
     assert!(v["path_to_raw_ratio"].as_f64().unwrap() > 0.0);
     let rows = v["regeneration"].as_array().unwrap();
     assert_eq!(rows.len(), 18, "path and bdpt × 3 variants × 3 widths");

@@ -219,3 +219,55 @@ fn instance_normals_are_reported_in_object_space() {
     // World normal would be ±Y; the square's object-space normal is +Z.
     assert!((n - Vec3::Z).length() < 1e-6, "Ng = {n}");
 }
+
+/// A fan of `n` triangles around `center` in the plane z = `center.z`, radius `r`: every spoke is
+/// an edge shared by two triangles.
+fn fan(device: &Device, intersector: relume::embree::Intersector, center: Vec3, r: f32, n: u32) -> CommittedScene {
+    let mut s = Scene::with_intersector(device, SceneQuality::Static, intersector).unwrap();
+    let mut p = vec![center];
+    for i in 0..n {
+        let a = std::f32::consts::TAU * i as f32 / n as f32;
+        p.push(center + r * Vec3::new(a.cos(), a.sin(), 0.0));
+    }
+    let tris: Vec<[u32; 3]> = (0..n).map(|i| [0, 1 + i, 1 + (i + 1) % n]).collect();
+    s.attach_triangles(&p, &tris).unwrap();
+    s.commit().unwrap()
+}
+
+/// Rays aimed at points on the shared spokes of a fan far from the origin that miss it.
+fn edge_misses(device: &Device, intersector: relume::embree::Intersector) -> (u32, u32) {
+    let center = Vec3::new(4096.3, -1024.7, 3.1);
+    let n = 97;
+    let scene = fan(device, intersector, center, 5.0, n);
+    let mut rng = relume::core::Rng::new(5, 5);
+    let (mut misses, mut rays) = (0, 0);
+    for i in 0..n {
+        let a = std::f32::consts::TAU * i as f32 / n as f32;
+        let spoke = center + 5.0 * Vec3::new(a.cos(), a.sin(), 0.0);
+        for _ in 0..400 {
+            let target = center.lerp(spoke, 0.05 + 0.9 * rng.next_f32());
+            let u = rng.next_2d();
+            let origin = target + Vec3::new(40.0 * u.x - 20.0, 40.0 * u.y - 20.0, 7.0 + 30.0 * rng.next_f32());
+            rays += 1;
+            if scene.intersect1(&Ray::new(origin, (target - origin).normalize())).is_none() {
+                misses += 1;
+            }
+        }
+    }
+    (misses, rays)
+}
+
+#[test]
+fn robust_triangles_are_watertight_along_shared_edges() {
+    // Property: why every level of `SceneAccel` is robust although Embree's fast kernel traces
+    // as fast on the bundled scenes (`relume bench rays`): rays aimed at edges shared by two
+    // triangles, 4 km from the origin, all hit. The fast kernel, the negative control, lets
+    // some through the cracks.
+    for_each_isa(|isa, device| {
+        let (misses, rays) = edge_misses(device, relume::embree::Intersector::Robust);
+        let (fast_misses, _) = edge_misses(device, relume::embree::Intersector::Fast);
+        eprintln!("{isa:?}: {rays} rays at shared edges: robust {misses} misses, fast {fast_misses}");
+        assert_eq!(misses, 0, "{isa:?}");
+        assert!(fast_misses > 0, "{isa:?}: the fast kernel found no crack, so the test cannot fail");
+    });
+}

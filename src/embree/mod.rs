@@ -67,4 +67,4 @@ pub use error::EmbreeError;
 pub use flush::flush_denormals_to_zero;
 pub use isa::{Isa, UnknownIsa};
 pub use query::{Hit, Ray, PACKET16, PACKET8};
-pub use scene::{padded_vertex_floats, CommittedScene, GeometryId, Scene, SceneQuality};
+pub use scene::{padded_vertex_floats, CommittedScene, GeometryId, Intersector, Scene, SceneQuality};

@@ -10,12 +10,22 @@ use std::sync::Arc;
 /// Embree's id of a geometry within one scene (`geomID`, or `instID` for instances).
 pub type GeometryId = u32;
 
-/// How a scene is built: a static scene favours trace speed, a dynamic one rebuild speed.
-/// Both are built with `RTC_SCENE_FLAG_ROBUST`, so shared edges stay watertight.
+/// How a scene is built: a static scene favours trace speed (`RTC_BUILD_QUALITY_HIGH`), a
+/// dynamic one rebuild speed (`RTC_SCENE_FLAG_DYNAMIC`, `RTC_BUILD_QUALITY_LOW`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SceneQuality {
     Static,
     Dynamic,
+}
+
+/// Which triangle test Embree compiles in. `Robust` (`RTC_SCENE_FLAG_ROBUST`) is watertight
+/// along shared edges; Embree 3 then also ignores `RTC_BUILD_QUALITY_HIGH`'s spatial splits.
+/// `Fast` is Embree's default kernel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Intersector {
+    Robust,
+    Fast,
 }
 
 /// Bytes a shared Embree buffer needs for `count` elements of `stride` bytes: Embree reads the
@@ -90,15 +100,26 @@ pub struct CommittedScene {
 }
 
 impl Scene {
+    /// A robust scene of the given quality.
     pub fn new(device: &Device, quality: SceneQuality) -> Result<Scene, EmbreeError> {
+        Scene::with_intersector(device, quality, Intersector::Robust)
+    }
+
+    pub fn with_intersector(
+        device: &Device,
+        quality: SceneQuality,
+        intersector: Intersector,
+    ) -> Result<Scene, EmbreeError> {
         // SAFETY: the device handle is live for as long as `device` exists.
         let raw = unsafe { sys::rtcNewScene(device.raw()) };
         device.check(|| "rtcNewScene".into())?;
+        let robust = match intersector {
+            Intersector::Robust => sys::RTC_SCENE_FLAG_ROBUST,
+            Intersector::Fast => sys::RTC_SCENE_FLAG_NONE,
+        };
         let (flags, build) = match quality {
-            SceneQuality::Static => (sys::RTC_SCENE_FLAG_ROBUST, sys::RTC_BUILD_QUALITY_HIGH),
-            SceneQuality::Dynamic => {
-                (sys::RTC_SCENE_FLAG_ROBUST | sys::RTC_SCENE_FLAG_DYNAMIC, sys::RTC_BUILD_QUALITY_LOW)
-            }
+            SceneQuality::Static => (robust, sys::RTC_BUILD_QUALITY_HIGH),
+            SceneQuality::Dynamic => (robust | sys::RTC_SCENE_FLAG_DYNAMIC, sys::RTC_BUILD_QUALITY_LOW),
         };
         // SAFETY: `raw` is a live scene handle we own.
         unsafe {

@@ -1,82 +1,103 @@
-//! The scene as a two-level Embree scene, and the map from Embree ids back to surfaces.
+//! The scene as Embree scenes, and the map from Embree ids back to surfaces.
 //!
-//! Layout: every static object and static light shape is one geometry (world-space vertices) of
-//! a single bottom-level scene, which is built once and never rebuilt. Each dynamic object or
-//! dynamic light shape is its own bottom-level scene (object-space vertices) under an instance
-//! whose transform edits update. The top-level scene holds the static instance (identity) and
-//! the dynamic instances; only it is recommitted when something moves.
+//! Layout ([`AccelLayout`]): every static object and static light shape is one triangle
+//! geometry in world space, built once. Each dynamic object or dynamic light shape is its own
+//! bottom-level scene (object-space vertices) under an instance whose transform edits update.
+//! With `flat_static` (the default) the static geometries sit directly in the top-level scene,
+//! so a ray that meets them pays no instance transform and, in a scene with nothing dynamic, one
+//! traversal of one BVH; otherwise they share one bottom-level scene under an identity instance.
+//! Only the top level is recommitted when something moves; in a top level with static
+//! triangles, Embree's dynamic-scene builder keeps each unmodified geometry's own BVH.
 use super::{Scene, SurfaceId};
-use crate::embree::{CommittedScene, Device, EmbreeError, GeometryId, Hit, Scene as EmbreeScene, SceneQuality};
-use glam::Affine3A;
+use crate::embree::{
+    CommittedScene, Device, EmbreeError, GeometryId, Hit, Intersector, Scene as EmbreeScene, SceneQuality,
+};
+use glam::{Affine3A, Vec3};
 use std::collections::HashMap;
 use std::sync::Arc;
 
-/// What an instance of the top-level scene stands for.
+/// How [`SceneAccel`] lays the scene out in Embree. The default was chosen with
+/// `relume bench rays`, which measures the alternatives in one run (`docs/benchmarks.md`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct AccelLayout {
+    /// Static geometry directly in the top-level scene, rather than under one identity instance.
+    pub flat_static: bool,
+    /// The triangle test of every level.
+    pub intersector: Intersector,
+}
+
+impl Default for AccelLayout {
+    fn default() -> AccelLayout {
+        AccelLayout { flat_static: true, intersector: Intersector::Robust }
+    }
+}
+
+/// What a top-level geometry or instance stands for.
 #[derive(Clone, Debug)]
-enum InstanceContent {
-    /// The static bottom-level scene; `geomID` indexes this table.
-    Static(Vec<SurfaceId>),
-    Dynamic(SurfaceId),
+enum Slot {
+    /// A static triangle geometry of the top level, or a dynamic surface's instance.
+    Surface(SurfaceId),
+    /// The identity instance of the nested static scene; its `geomID` indexes this table.
+    StaticInstance(Vec<SurfaceId>),
+}
+
+/// One surface's triangles in the space they are stored in.
+struct Part {
+    id: SurfaceId,
+    positions: Vec<Vec3>,
+    triangles: Vec<[u32; 3]>,
+    world_from_object: Affine3A,
 }
 
 pub struct SceneAccel {
     top: Arc<CommittedScene>,
-    instances: Vec<Option<InstanceContent>>,
+    slots: Vec<Option<Slot>>,
     /// Each dynamic surface's instance in `top` and its bottom-level scene.
     instance_of: HashMap<SurfaceId, (GeometryId, Arc<CommittedScene>)>,
+    layout: AccelLayout,
 }
 
 impl SceneAccel {
     pub fn build(device: &Device, scene: &Scene) -> Result<SceneAccel, EmbreeError> {
-        // Gather every intersectable surface with its vertices in the space it is stored in.
-        let mut static_scene = EmbreeScene::new(device, SceneQuality::Static)?;
-        let mut static_map = Vec::new();
-        let mut dynamic = Vec::new();
-        for (i, o) in scene.objects.iter().enumerate() {
-            let id = SurfaceId::Object(i as u32);
-            if o.dynamic {
-                dynamic.push((id, o.mesh.positions.clone(), o.mesh.triangles.clone(), o.world_from_object));
-            } else {
-                let g = static_scene.attach_triangles(&o.world_positions, &o.mesh.triangles)?;
-                set_slot(&mut static_map, g, id);
-            }
-        }
-        for (i, l) in scene.lights.iter().enumerate() {
-            let Some(mesh) = &l.mesh else { continue };
-            let id = SurfaceId::Light(i as u32);
-            let desc = &scene.desc().lights[i];
-            if l.dynamic {
-                dynamic.push((id, mesh.positions.clone(), mesh.triangles.clone(), desc.transform.world_from_object()));
-            } else {
-                let tris: Vec<[u32; 3]> =
-                    (0..mesh.triangles.len() as u32).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect();
-                let verts: Vec<_> = (0..mesh.triangles.len()).flat_map(|t| scene.triangle(id, t as u32)).collect();
-                let g = static_scene.attach_triangles(&verts, &tris)?;
-                set_slot(&mut static_map, g, id);
-            }
-        }
+        SceneAccel::build_with(device, scene, AccelLayout::default())
+    }
 
-        // The top level: one instance for all static geometry, one per dynamic surface.
-        let mut top = EmbreeScene::new(device, SceneQuality::Dynamic)?;
-        let mut instances = Vec::new();
+    pub fn build_with(device: &Device, scene: &Scene, layout: AccelLayout) -> Result<SceneAccel, EmbreeError> {
+        let (statics, dynamics) = parts(scene);
+        let quality = if dynamics.is_empty() { SceneQuality::Static } else { SceneQuality::Dynamic };
+        let mut top = EmbreeScene::with_intersector(device, quality, layout.intersector)?;
+        let mut slots = Vec::new();
+        if layout.flat_static {
+            for part in &statics {
+                let g = top.attach_triangles(&part.positions, &part.triangles)?;
+                set_slot(&mut slots, g, Slot::Surface(part.id));
+            }
+        } else if !statics.is_empty() {
+            let mut nested = EmbreeScene::with_intersector(device, SceneQuality::Static, layout.intersector)?;
+            let mut map = Vec::new();
+            for part in &statics {
+                let g = nested.attach_triangles(&part.positions, &part.triangles)?;
+                set_slot(&mut map, g, part.id);
+            }
+            let inst = top.attach_instance(Arc::new(nested.commit()?), Affine3A::IDENTITY)?;
+            let map = map.into_iter().map(|s| s.unwrap_or(SurfaceId::Object(0))).collect();
+            set_slot(&mut slots, inst, Slot::StaticInstance(map));
+        }
         let mut instance_of = HashMap::new();
-        if static_scene.geometry_count() > 0 {
-            let inst = top.attach_instance(Arc::new(static_scene.commit()?), Affine3A::IDENTITY)?;
-            set_slot(
-                &mut instances,
-                inst,
-                InstanceContent::Static(static_map.into_iter().map(|s| s.unwrap_or(SurfaceId::Object(0))).collect()),
-            );
-        }
-        for (id, positions, triangles, xf) in dynamic {
-            let mut blas = EmbreeScene::new(device, SceneQuality::Static)?;
-            blas.attach_triangles(&positions, &triangles)?;
+        for part in dynamics {
+            let mut blas = EmbreeScene::with_intersector(device, SceneQuality::Static, layout.intersector)?;
+            blas.attach_triangles(&part.positions, &part.triangles)?;
             let blas = Arc::new(blas.commit()?);
-            let inst = top.attach_instance(blas.clone(), xf)?;
-            set_slot(&mut instances, inst, InstanceContent::Dynamic(id));
-            instance_of.insert(id, (inst, blas));
+            let inst = top.attach_instance(blas.clone(), part.world_from_object)?;
+            set_slot(&mut slots, inst, Slot::Surface(part.id));
+            instance_of.insert(part.id, (inst, blas));
         }
-        Ok(SceneAccel { top: Arc::new(top.commit()?), instances, instance_of })
+        Ok(SceneAccel { top: Arc::new(top.commit()?), slots, instance_of, layout })
+    }
+
+    /// The layout this accel was built with.
+    pub fn layout(&self) -> AccelLayout {
+        self.layout
     }
 
     /// The committed top-level scene, for queries.
@@ -86,11 +107,13 @@ impl SceneAccel {
 
     /// Maps a hit to the surface and triangle it landed on.
     pub fn resolve(&self, hit: &Hit) -> Option<(SurfaceId, u32)> {
-        let inst = hit.inst_id? as usize;
-        match self.instances.get(inst)?.as_ref()? {
-            InstanceContent::Static(map) => map.get(hit.geom_id as usize).map(|s| (*s, hit.prim_id)),
-            InstanceContent::Dynamic(s) => Some((*s, hit.prim_id)),
-        }
+        let slot = self.slots.get(hit.inst_id.unwrap_or(hit.geom_id) as usize)?.as_ref()?;
+        let surface = match (slot, hit.inst_id) {
+            (Slot::Surface(s), _) => *s,
+            (Slot::StaticInstance(map), Some(_)) => *map.get(hit.geom_id as usize)?,
+            (Slot::StaticInstance(_), None) => return None,
+        };
+        Some((surface, hit.prim_id))
     }
 
     /// Updates the instances of `moved` surfaces to their current transforms and recommits the
@@ -126,13 +149,44 @@ impl SceneAccel {
     /// Like [`SceneAccel::subset`], with each dynamic surface under the given transform (where
     /// it was before a move, say).
     pub fn subset_at(&self, placed: &[(SurfaceId, Affine3A)]) -> Result<CommittedScene, EmbreeError> {
-        let mut subset = EmbreeScene::new(self.top.device(), SceneQuality::Dynamic)?;
+        let mut subset =
+            EmbreeScene::with_intersector(self.top.device(), SceneQuality::Dynamic, self.layout.intersector)?;
         for (id, transform) in placed {
             let (_, blas) = self.instance_of.get(id).ok_or(EmbreeError::UnknownGeometry(u32::MAX))?;
             subset.attach_instance(blas.clone(), *transform)?;
         }
         subset.commit()
     }
+}
+
+/// Every intersectable surface, static ones in world space and dynamic ones in object space
+/// with their current transforms: (static, dynamic).
+fn parts(scene: &Scene) -> (Vec<Part>, Vec<Part>) {
+    let (mut statics, mut dynamics) = (Vec::new(), Vec::new());
+    for (i, o) in scene.objects.iter().enumerate() {
+        let id = SurfaceId::Object(i as u32);
+        if o.dynamic {
+            let (positions, triangles) = (o.mesh.positions.clone(), o.mesh.triangles.clone());
+            dynamics.push(Part { id, positions, triangles, world_from_object: o.world_from_object });
+        } else {
+            let (positions, triangles) = (o.world_positions.clone(), o.mesh.triangles.clone());
+            statics.push(Part { id, positions, triangles, world_from_object: Affine3A::IDENTITY });
+        }
+    }
+    for (i, l) in scene.lights.iter().enumerate() {
+        let Some(mesh) = &l.mesh else { continue };
+        let id = SurfaceId::Light(i as u32);
+        if l.dynamic {
+            let world_from_object = scene.desc().lights[i].transform.world_from_object();
+            let (positions, triangles) = (mesh.positions.clone(), mesh.triangles.clone());
+            dynamics.push(Part { id, positions, triangles, world_from_object });
+        } else {
+            let triangles = (0..mesh.triangles.len() as u32).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect();
+            let positions = (0..mesh.triangles.len()).flat_map(|t| scene.triangle(id, t as u32)).collect();
+            statics.push(Part { id, positions, triangles, world_from_object: Affine3A::IDENTITY });
+        }
+    }
+    (statics, dynamics)
 }
 
 /// Where a dynamic surface is now.

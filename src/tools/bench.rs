@@ -2,7 +2,10 @@
 //!
 //! 1. Raw Embree throughput on the scene: coherent primary rays in 16-wide packets, incoherent
 //!    closest-hit rays (cosine-distributed from first hits) and incoherent occlusion rays (from
-//!    first hits to light samples), single rays on every worker.
+//!    first hits to light samples), single rays on every worker. It is measured on each
+//!    [`AccelLayout`]: static geometry nested under an identity instance or flat in the top
+//!    level, robust or fast triangle test, and on a frozen copy with every surface flat (the
+//!    ceiling: one BVH, no instances), so the default layout's choice is a measurement.
 //! 2. The `path` technique's achieved ray rate, as a fraction of the raw incoherent rate.
 //! 3. Path regeneration against none at packet widths 1, 8 and 16 on dark (ρ × 0.5), normal and
 //!    bright (ρ_S ≈ 0.8) variants of the scene, as in Novák et al. (2010), Table 1, for `path`
@@ -11,8 +14,9 @@
 //! Each measurement repeats until `--seconds` have passed; only rates in one run are compared.
 use super::SceneArgs;
 use crate::core::{offset_ray_origin, sampling, Rng, ShadingFrame};
-use crate::embree::{Device, Ray};
+use crate::embree::{Device, Intersector, Ray};
 use crate::engine::{thread_pool, Session};
+use crate::scene::accel::AccelLayout;
 use crate::scene::{Scene, SceneAccel};
 use crate::technique::bdpt::BdptConfig;
 use crate::technique::path::{max_path_length, PathConfig};
@@ -38,6 +42,10 @@ pub struct RaysArgs {
 
 #[derive(Debug, Serialize)]
 pub struct RawThroughput {
+    /// `default` (the layout every technique uses), `nested`, `flat`, or `frozen` (every
+    /// surface static and flat).
+    pub accel: String,
+    pub layout: AccelLayout,
     pub coherent_primary_mrays: f64,
     pub incoherent_closest_mrays: f64,
     pub incoherent_occlusion_mrays: f64,
@@ -67,12 +75,15 @@ pub struct RaysReport {
     pub width: u32,
     pub height: u32,
     pub threads: usize,
-    pub raw: RawThroughput,
+    /// Raw rates per layout; the first row is the default layout.
+    pub raw: Vec<RawThroughput>,
     /// The default `path` configuration's rate.
     pub path_mrays: f64,
     pub path_samples_per_second: f64,
-    /// path_mrays ÷ raw incoherent closest-hit rate.
+    /// path_mrays ÷ the default layout's raw incoherent closest-hit rate.
     pub path_to_raw_ratio: f64,
+    /// path_mrays ÷ the best raw incoherent closest-hit rate of any layout.
+    pub path_to_best_raw_ratio: f64,
     pub regeneration: Vec<RegenerationRow>,
 }
 
@@ -114,7 +125,43 @@ fn incoherent_rays(scene: &Scene, accel: &SceneAccel) -> (Vec<Ray>, Vec<Ray>) {
     (bounce, shadow)
 }
 
-fn raw_throughput(scene: &Scene, accel: &SceneAccel, seconds: f64) -> RawThroughput {
+/// The layouts `bench rays` compares: (name, frozen, layout). The default comes first.
+fn raw_layouts() -> Vec<(&'static str, bool, AccelLayout)> {
+    let mut out = vec![("default", false, AccelLayout::default())];
+    for intersector in [Intersector::Robust, Intersector::Fast] {
+        for (name, flat_static) in [("nested", false), ("flat", true)] {
+            let layout = AccelLayout { flat_static, intersector };
+            if layout != AccelLayout::default() {
+                out.push((name, false, layout));
+            }
+        }
+        out.push(("frozen", true, AccelLayout { flat_static: true, intersector }));
+    }
+    out
+}
+
+/// Raw rates on every layout of [`raw_layouts`]; rays are cast from the default accel's hits.
+fn raw_rows(scene: &Scene, device: &Device, seconds: f64) -> Result<Vec<RawThroughput>> {
+    let rays = incoherent_rays(scene, &SceneAccel::build(device, scene)?);
+    let mut frozen = scene.clone();
+    frozen.objects.iter_mut().for_each(|o| o.dynamic = false);
+    frozen.lights.iter_mut().for_each(|l| l.dynamic = false);
+    raw_layouts()
+        .into_iter()
+        .map(|(name, freeze, layout)| {
+            let accel = SceneAccel::build_with(device, if freeze { &frozen } else { scene }, layout)?;
+            Ok(raw_throughput(scene, &accel, &rays, seconds, name))
+        })
+        .collect()
+}
+
+fn raw_throughput(
+    scene: &Scene,
+    accel: &SceneAccel,
+    (bounce, shadow): &(Vec<Ray>, Vec<Ray>),
+    seconds: f64,
+    name: &str,
+) -> RawThroughput {
     let committed = accel.scene();
     let (w, h) = (scene.camera.width as usize, scene.camera.height as usize);
     let coherent = rate(seconds, || {
@@ -134,7 +181,6 @@ fn raw_throughput(scene: &Scene, accel: &SceneAccel, seconds: f64) -> RawThrough
             })
             .sum()
     });
-    let (bounce, shadow) = incoherent_rays(scene, accel);
     let closest = rate(seconds, || {
         bounce.par_iter().map(|r| std::hint::black_box(committed.intersect1(r)).map_or(1, |_| 1)).sum()
     });
@@ -148,6 +194,8 @@ fn raw_throughput(scene: &Scene, accel: &SceneAccel, seconds: f64) -> RawThrough
             .sum()
     });
     RawThroughput {
+        accel: name.to_string(),
+        layout: accel.layout(),
         coherent_primary_mrays: coherent,
         incoherent_closest_mrays: closest,
         incoherent_occlusion_mrays: occlusion,
@@ -195,16 +243,15 @@ pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
     let threads = args.target.threads();
     let pool = thread_pool(threads)?;
     let device = args.target.device()?;
-    let accel = SceneAccel::build(&device, &scene)?;
     let variants = [("dark", 0.5f32), ("normal", 1.0), ("bright", 0.8 / scene.mean_reflectance().max(1e-3))];
     let widths = [1u32, 8, 16];
     let techniques = ["path", "bdpt"];
-    let bar = ProgressBar::new((3 + 1 + techniques.len() * variants.len() * widths.len() * 2) as u64);
+    let bar = ProgressBar::new((raw_layouts().len() + 1 + techniques.len() * variants.len() * widths.len() * 2) as u64);
     bar.set_style(indicatif::ProgressStyle::with_template("{msg:32} [{bar:30}] {pos}/{len}")?.progress_chars("=> "));
     pool.install(|| -> Result<RaysReport> {
         bar.set_message("raw Embree throughput");
-        let raw = raw_throughput(&scene, &accel, args.seconds);
-        bar.inc(3);
+        let raw = raw_rows(&scene, &device, args.seconds)?;
+        bar.inc(raw.len() as u64);
         bar.set_message("path, default configuration");
         let (path_mrays, path_sps, _, _) =
             lane_rate(&scene, TechniqueConfig::Path(PathConfig::default()), &device, args.seconds)?;
@@ -244,7 +291,8 @@ pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
             width: scene.camera.width,
             height: scene.camera.height,
             threads,
-            path_to_raw_ratio: path_mrays / raw.incoherent_closest_mrays,
+            path_to_raw_ratio: path_mrays / raw[0].incoherent_closest_mrays,
+            path_to_best_raw_ratio: path_mrays / raw.iter().map(|r| r.incoherent_closest_mrays).fold(0.0, f64::max),
             raw,
             path_mrays,
             path_samples_per_second: path_sps,
@@ -257,15 +305,25 @@ pub fn print_table(r: &RaysReport) {
     println!("relume bench rays: {} at {}x{}, {} threads", r.scene, r.width, r.height, r.threads);
     println!();
     println!("raw Embree throughput (Mrays/s)");
-    println!("  coherent primary (16-wide packets)  {:>8.2}", r.raw.coherent_primary_mrays);
-    println!("  incoherent closest hit (single)     {:>8.2}", r.raw.incoherent_closest_mrays);
-    println!("  incoherent occlusion (single)       {:>8.2}", r.raw.incoherent_occlusion_mrays);
+    println!("  accel    static  triangles  coherent primary (16-wide)  incoherent closest  incoherent occlusion");
+    for row in &r.raw {
+        println!(
+            "  {:<8} {:<7} {:<10} {:>26.2} {:>19.2} {:>21.2}",
+            row.accel,
+            if row.layout.flat_static { "flat" } else { "nested" },
+            format!("{:?}", row.layout.intersector).to_lowercase(),
+            row.coherent_primary_mrays,
+            row.incoherent_closest_mrays,
+            row.incoherent_occlusion_mrays
+        );
+    }
     println!();
     println!(
         "path (default configuration)          {:>8.2} Mrays/s, {:.0} paths/s",
         r.path_mrays, r.path_samples_per_second
     );
-    println!("  achieved / raw incoherent           {:>8.2}", r.path_to_raw_ratio);
+    println!("  achieved / default raw incoherent   {:>8.2}", r.path_to_raw_ratio);
+    println!("  achieved / best raw incoherent      {:>8.2}", r.path_to_best_raw_ratio);
     println!();
     println!("regeneration (PR) vs none (NO)");
     println!("  technique variant  rho_S  l_m  l_a   lanes  NO util  NO Mrays/s  PR util  PR Mrays/s  speedup");
