@@ -114,3 +114,36 @@ fn it_accumulates_progressively_and_restarts_when_the_scene_changes() {
     assert_ne!(after.accumulation_id, second.accumulation_id);
     assert_finite_non_negative(&after.image);
 }
+
+#[test]
+fn light_subpath_roulette_does_not_depend_on_the_lights_units() {
+    // Property: Russian roulette on light subpaths uses the throughput since the light, so with
+    // the same seed a light 10⁴ times brighter traces the same light subpaths (rays per subpath
+    // equal) and only the image scales. Roulette on the flux-carrying β, as before, never fired
+    // for a bright light: its subpaths ran to l_m.
+    let room = |radiance: f32, reflectance: f32| {
+        scene_from_json(json!({
+            "camera": {"position": [0, 1, -1.9], "look_at": [0, 1, 0], "vfov_deg": 70, "resolution": [16, 16]},
+            "materials": {"wall": {"type": "diffuse", "reflectance": [reflectance, reflectance, reflectance]}},
+            "objects": [{"name": "room", "shape": {"type": "box"}, "material": "wall",
+                         "transform": {"translation": [0, 1, 0], "scale": [2, 1, 2]}}],
+            "lights": [{"name": "panel", "emitter": {"type": "rect", "radiance": [radiance, radiance, radiance]},
+                        "transform": {"translation": [0, 1.95, 0], "rotation": FACE_DOWN, "scale": [0.3, 0.3, 1]}}]
+        }))
+    };
+    let run = |scene| {
+        let frame = render(scene, TechniqueConfig::Bdpt(bdpt(2)), 3, 1, 1);
+        let relume::technique::TechniqueStats::Bdpt(s) = &frame.stats.detail else { panic!("bdpt stats expected") };
+        let mean = frame.image.pixels.iter().map(|p| p.r as f64).sum::<f64>() / frame.image.pixels.len() as f64;
+        (s.light_subpath_rays as f64 / s.light_subpaths as f64, mean)
+    };
+    let (base_rays, base_mean) = run(room(1.0, 0.7));
+    let (bright_rays, bright_mean) = run(room(1e4, 0.7));
+    eprintln!("rays per light subpath: radiance 1 {base_rays:.3}, radiance 1e4 {bright_rays:.3}");
+    let tolerance = 0.01;
+    assert!((bright_rays / base_rays - 1.0).abs() < tolerance, "{bright_rays} vs {base_rays}");
+    assert!((bright_mean / base_mean / 1e4 - 1.0).abs() < 1e-3, "image ratio {}", bright_mean / base_mean);
+    // Negative control: halving the walls' reflectance shortens the subpaths beyond the tolerance.
+    let (dark_rays, _) = run(room(1.0, 0.35));
+    assert!((dark_rays / base_rays - 1.0).abs() > tolerance, "{dark_rays} vs {base_rays}");
+}

@@ -184,7 +184,7 @@ pub fn hit_vertex(
 
 /// Traces one light subpath of at most `max_vertices` vertices after the light's: a light by
 /// power, a point and direction by its emission distribution, then BSDF sampling with Russian
-/// roulette by throughput. Lights absorb: a light subpath stops where it meets one. Returns the
+/// roulette by the throughput since the light (scale-free: the light's units do not matter). Lights absorb: a light subpath stops where it meets one. Returns the
 /// vertices and the rays traced.
 pub fn light_subpath(scene: &Scene, accel: &SceneAccel, max_vertices: usize, rng: &mut Rng) -> (Vec<Vertex>, u64) {
     let mut path = Vec::new();
@@ -206,6 +206,7 @@ pub fn light_subpath(scene: &Scene, accel: &SceneAccel, max_vertices: usize, rng
     let mut ray = Ray::new(origin, dir);
     let mut beta = weight / pmf;
     let mut pdf_dir = geometry.pdf_emission_direction(n, dir);
+    let mut scattered = Rgb::WHITE;
     let mut rays = 0;
     while path.len() <= max_vertices {
         rays += 1;
@@ -224,12 +225,16 @@ pub fn light_subpath(scene: &Scene, accel: &SceneAccel, max_vertices: usize, rng
         let k = path.len() - 1;
         path[k - 1].pdf_rev = to_area(rev, &path[k], &path[k - 1]);
         beta *= weight;
-        let q = beta.max_component().min(1.0);
+        scattered *= weight;
+        // Roulette on the product of BSDF weights, not on β: β carries the light's flux in
+        // scene units (about 7·10⁵ in the millimetre Cornell box), which would never roulette.
+        let q = scattered.max_component().min(1.0);
         if k > 1 && q < 1.0 {
             if rng.next_f32() >= q {
                 break;
             }
             beta = beta / q;
+            scattered = scattered / q;
         }
         if beta.is_black() {
             break;
