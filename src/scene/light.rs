@@ -15,9 +15,26 @@ use std::f32::consts::PI;
 /// A light's world-space emission geometry.
 #[derive(Clone, Debug)]
 pub enum LightGeometry {
-    Point { position: Vec3, intensity: Rgb },
-    Spot { position: Vec3, axis: Vec3, intensity: Rgb, cos_falloff_start: f32, cos_falloff_end: f32 },
-    Area { radiance: Rgb, triangles: Vec<[Vec3; 3]>, area: f32, by_area: DiscreteDistribution },
+    Point {
+        position: Vec3,
+        intensity: Rgb,
+    },
+    Spot {
+        position: Vec3,
+        axis: Vec3,
+        intensity: Rgb,
+        cos_falloff_start: f32,
+        cos_falloff_end: f32,
+    },
+    /// `normals[i]` is triangle i's unit normal (its emitting side), kept so sampling a point
+    /// costs no cross product.
+    Area {
+        radiance: Rgb,
+        triangles: Vec<[Vec3; 3]>,
+        normals: Vec<Vec3>,
+        area: f32,
+        by_area: DiscreteDistribution,
+    },
 }
 
 /// An incident-radiance sample towards a light.
@@ -79,11 +96,16 @@ pub fn emitter_mesh(emitter: &EmitterDesc) -> Option<Mesh> {
 
 /// A point uniformly distributed by area over an area light's triangles, with its unit normal.
 /// `by_area` must not be empty.
-fn sample_area_point(triangles: &[[Vec3; 3]], by_area: &DiscreteDistribution, u: Vec2) -> (Vec3, Vec3) {
+fn sample_area_point(
+    triangles: &[[Vec3; 3]],
+    normals: &[Vec3],
+    by_area: &DiscreteDistribution,
+    u: Vec2,
+) -> (Vec3, Vec3) {
     let (i, _, u0) = by_area.sample(u.x);
     let [a, b, c] = triangles[i];
     let bary = sampling::uniform_triangle(Vec2::new(u0, u.y));
-    (a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y, (b - a).cross(c - a).normalize())
+    (a * (1.0 - bary.x - bary.y) + b * bary.x + c * bary.y, normals[i])
 }
 
 /// Smoothstep from `lo` to `hi`, as pbrt-v4's spot falloff uses.
@@ -121,7 +143,8 @@ impl LightGeometry {
                     triangles.iter().map(|[a, b, c]| 0.5 * (*b - *a).cross(*c - *a).length()).collect();
                 let area = areas.iter().sum();
                 let by_area = DiscreteDistribution::new(&areas).unwrap_or_default();
-                LightGeometry::Area { radiance: *radiance, triangles, area, by_area }
+                let normals = triangles.iter().map(|[a, b, c]| (*b - *a).cross(*c - *a).normalize_or_zero()).collect();
+                LightGeometry::Area { radiance: *radiance, triangles, normals, area, by_area }
             }
             (
                 EmitterDesc::Rect { radiance }
@@ -131,6 +154,7 @@ impl LightGeometry {
             ) => LightGeometry::Area {
                 radiance: *radiance,
                 triangles: Vec::new(),
+                normals: Vec::new(),
                 area: 0.0,
                 by_area: DiscreteDistribution::default(),
             },
@@ -198,11 +222,11 @@ impl LightGeometry {
                     normal: Vec3::ZERO,
                 })
             }
-            LightGeometry::Area { radiance, triangles, area, by_area } => {
+            LightGeometry::Area { radiance, triangles, normals, area, by_area } => {
                 if by_area.is_empty() {
                     return None;
                 }
-                let (q, n) = sample_area_point(triangles, by_area, u);
+                let (q, n) = sample_area_point(triangles, normals, by_area, u);
                 let d = q - p;
                 let dist2 = d.length_squared();
                 let dist = dist2.sqrt();
@@ -250,11 +274,11 @@ impl LightGeometry {
                 let local = sampling::uniform_cone(u_dir, *cos_falloff_end);
                 (*position, crate::core::ShadingFrame::from_normal(*axis).to_world(local))
             }
-            LightGeometry::Area { triangles, by_area, .. } => {
+            LightGeometry::Area { triangles, normals, by_area, .. } => {
                 if by_area.is_empty() {
                     return None;
                 }
-                let (on_light, n) = sample_area_point(triangles, by_area, u_pos);
+                let (on_light, n) = sample_area_point(triangles, normals, by_area, u_pos);
                 let dir = crate::core::ShadingFrame::from_normal(n).to_world(sampling::cosine_hemisphere(u_dir));
                 // Off the light's surface, so the ray cannot hit its own light.
                 (crate::core::offset_ray_origin(on_light, n), dir)

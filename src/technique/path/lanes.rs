@@ -103,7 +103,8 @@ fn shade(lane: &mut PathLane, hit: Option<Hit>, scene: &Scene, accel: &SceneAcce
         return None;
     };
     let sp = scene.surface_point(surface, prim, h.u, h.v);
-    let wo = -lane.ray.dir.normalize();
+    // Camera rays are normalized and BSDF samples are unit vectors: no normalize needed.
+    let wo = -lane.ray.dir;
     lane.depth += 1;
 
     // Emission: lights are black absorbers that end the path.
