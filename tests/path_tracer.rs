@@ -122,3 +122,28 @@ fn progressive_accumulation_resets_on_change() {
     assert_eq!(f3.spp, 1);
     assert_eq!(f3.stats.edits_received, 1);
 }
+
+#[test]
+fn the_fraction_of_paths_cut_at_l_m_is_the_analytic_one_and_within_c() {
+    // Property: in the furnace (ρ = 0.5, closed, no escape) a path survives roulette with
+    // probability ρ² at its second vertex and ρ at each later one, so the fraction cut short at
+    // l_m is exactly ρ^l_m, and l_m = ⌈log_ρ c⌉ keeps it below c (Novák et al. §3.3).
+    let mut scene = load("furnace.json");
+    scene.set_resolution(64, 64);
+    let frame = render(scene, TechniqueConfig::Path(path(16)), 7, 1, 2);
+    let relume::technique::TechniqueStats::Path(p) = &frame.stats.detail else { panic!("path stats expected") };
+    let n = p.paths as f64;
+    let observed = p.truncated_paths as f64 / n;
+    let expected = 0.5f64.powi(p.max_path_length as i32);
+    let sigma = (expected * (1.0 - expected) / n).sqrt();
+    eprintln!(
+        "l_m {}: {} of {} paths cut, {observed:.5} (analytic {expected:.5} ± {sigma:.5})",
+        p.max_path_length, p.truncated_paths, p.paths
+    );
+    assert!((observed - expected).abs() < 4.0 * sigma, "{observed} vs {expected}");
+    let c = relume::technique::path::PathConfig::default().admitted_truncation as f64;
+    assert!(observed < c, "{observed} of paths cut, c = {c}");
+    // Negative control: one vertex more (ρ^(l_m+1)) is outside the same 4σ.
+    let one_more = 0.5f64.powi(p.max_path_length as i32 + 1);
+    assert!((observed - one_more).abs() > 4.0 * sigma, "{observed} vs {one_more}");
+}

@@ -60,6 +60,8 @@ pub struct RegenerationRow {
     pub max_path_length: u32,
     /// Mean path length in segments (rays per path excluding shadow rays).
     pub mean_path_length: f64,
+    /// Paths cut at l_m ÷ paths, to set against c (`admitted_truncation`, 0.01 by default).
+    pub truncated_fraction: f64,
     pub packet_width: u32,
     pub no_regeneration_utilisation: f64,
     pub no_regeneration_mrays: f64,
@@ -202,13 +204,24 @@ fn raw_throughput(
     }
 }
 
-/// Runs a lane technique (`path` or `bdpt`) with `config` for `seconds`; returns (Mrays/s,
-/// paths/s, lane utilisation, eye segments per path).
-fn lane_rate(scene: &Scene, config: TechniqueConfig, device: &Device, seconds: f64) -> Result<(f64, f64, f64, f64)> {
+/// One lane technique's rates over a timed run.
+struct LaneRate {
+    mrays: f64,
+    paths_per_second: f64,
+    utilisation: f64,
+    /// Eye segments per path.
+    segments: f64,
+    /// Paths cut at l_m ÷ paths.
+    truncated: f64,
+}
+
+/// Runs a lane technique (`path` or `bdpt`) with `config` for `seconds`.
+fn lane_rate(scene: &Scene, config: TechniqueConfig, device: &Device, seconds: f64) -> Result<LaneRate> {
     let mut session = Session::new(scene.clone(), &config, 1, device)?;
     let start = Instant::now();
-    let (mut rays, mut paths, mut lanes, mut active, mut segments) = (0u64, 0u64, 0u64, 0u64, 0u64);
-    while paths == 0 || start.elapsed().as_secs_f64() < seconds {
+    let mut rays = 0u64;
+    let mut total = crate::technique::path::PathStats::default();
+    while total.paths == 0 || start.elapsed().as_secs_f64() < seconds {
         let frame = session.tick()?;
         rays += frame.stats.rays.total();
         let p = match &frame.stats.detail {
@@ -216,18 +229,17 @@ fn lane_rate(scene: &Scene, config: TechniqueConfig, device: &Device, seconds: f
             TechniqueStats::Bdpt(b) => b.lanes.clone(),
             _ => anyhow::bail!("bench rays measures the lane techniques (path, bdpt) only"),
         };
-        paths += p.paths;
-        lanes += p.lane_steps;
-        active += p.active_lane_steps;
-        segments += p.rays.primary + p.rays.secondary;
+        total = total.merge(p);
     }
     let secs = start.elapsed().as_secs_f64();
-    Ok((
-        rays as f64 / secs / 1e6,
-        paths as f64 / secs,
-        active as f64 / lanes.max(1) as f64,
-        segments as f64 / paths.max(1) as f64,
-    ))
+    let paths = total.paths.max(1) as f64;
+    Ok(LaneRate {
+        mrays: rays as f64 / secs / 1e6,
+        paths_per_second: total.paths as f64 / secs,
+        utilisation: total.lane_utilisation(),
+        segments: (total.rays.primary + total.rays.secondary) as f64 / paths,
+        truncated: total.truncated_paths as f64 / paths,
+    })
 }
 
 /// `technique` with `width` lanes and regeneration on or off, other parameters at defaults.
@@ -253,8 +265,8 @@ pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
         let raw = raw_rows(&scene, &device, args.seconds)?;
         bar.inc(raw.len() as u64);
         bar.set_message("path, default configuration");
-        let (path_mrays, path_sps, _, _) =
-            lane_rate(&scene, TechniqueConfig::Path(PathConfig::default()), &device, args.seconds)?;
+        let default_path = lane_rate(&scene, TechniqueConfig::Path(PathConfig::default()), &device, args.seconds)?;
+        let (path_mrays, path_sps) = (default_path.mrays, default_path.paths_per_second);
         bar.inc(1);
         let mut rows = Vec::new();
         for technique in techniques {
@@ -263,24 +275,23 @@ pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
                 let rho = variant.mean_reflectance();
                 for width in widths {
                     bar.set_message(format!("{technique}, {name}, {width} lanes"));
-                    let (no_rate, _, no_util, seg) =
-                        lane_rate(&variant, lane_config(technique, width, false), &device, args.seconds)?;
+                    let no = lane_rate(&variant, lane_config(technique, width, false), &device, args.seconds)?;
                     bar.inc(1);
-                    let (pr_rate, _, pr_util, _) =
-                        lane_rate(&variant, lane_config(technique, width, true), &device, args.seconds)?;
+                    let pr = lane_rate(&variant, lane_config(technique, width, true), &device, args.seconds)?;
                     bar.inc(1);
                     rows.push(RegenerationRow {
                         technique: technique.to_string(),
                         variant: name.to_string(),
                         mean_reflectance: rho,
                         max_path_length: max_path_length(rho, PathConfig::default().admitted_truncation),
-                        mean_path_length: seg,
+                        mean_path_length: no.segments,
+                        truncated_fraction: pr.truncated,
                         packet_width: width,
-                        no_regeneration_utilisation: no_util,
-                        no_regeneration_mrays: no_rate,
-                        regeneration_utilisation: pr_util,
-                        regeneration_mrays: pr_rate,
-                        speedup: pr_rate / no_rate,
+                        no_regeneration_utilisation: no.utilisation,
+                        no_regeneration_mrays: no.mrays,
+                        regeneration_utilisation: pr.utilisation,
+                        regeneration_mrays: pr.mrays,
+                        speedup: pr.mrays / no.mrays,
                     });
                 }
             }
@@ -326,15 +337,16 @@ pub fn print_table(r: &RaysReport) {
     println!("  achieved / best raw incoherent      {:>8.2}", r.path_to_best_raw_ratio);
     println!();
     println!("regeneration (PR) vs none (NO)");
-    println!("  technique variant  rho_S  l_m  l_a   lanes  NO util  NO Mrays/s  PR util  PR Mrays/s  speedup");
+    println!("  technique variant  rho_S  l_m  l_a  cut@l_m  lanes  NO util  NO Mrays/s  PR util  PR Mrays/s  speedup");
     for row in &r.regeneration {
         println!(
-            "  {:<9} {:<7} {:>5.2} {:>4} {:>4.1} {:>6} {:>8.2} {:>11.2} {:>8.2} {:>11.2} {:>8.2}",
+            "  {:<9} {:<7} {:>5.2} {:>4} {:>4.1} {:>8.4} {:>6} {:>8.2} {:>11.2} {:>8.2} {:>11.2} {:>8.2}",
             row.technique,
             row.variant,
             row.mean_reflectance,
             row.max_path_length,
             row.mean_path_length,
+            row.truncated_fraction,
             row.packet_width,
             row.no_regeneration_utilisation,
             row.no_regeneration_mrays,

@@ -34,6 +34,8 @@ pub struct BdptLane {
     /// The light subpath this eye path connects to when not permuting.
     own_light_path: usize,
     done: bool,
+    /// The eye path ended at l_m surface vertices.
+    truncated: bool,
 }
 
 impl LanePath for BdptLane {
@@ -49,6 +51,7 @@ impl LanePath for BdptLane {
             radiance: Rgb::BLACK,
             own_light_path: 0,
             done: false,
+            truncated: false,
         }
     }
 
@@ -73,6 +76,7 @@ impl LanePath for BdptLane {
         self.radiance = Rgb::BLACK;
         self.own_light_path = (self.rng.next_u32() as usize) % ctx.batch.len().max(1);
         self.done = false;
+        self.truncated = false;
     }
 
     fn ray(&self) -> Ray {
@@ -85,6 +89,10 @@ impl LanePath for BdptLane {
 
     fn done(&self) -> bool {
         self.done
+    }
+
+    fn truncated(&self) -> bool {
+        self.truncated
     }
 
     fn add(&mut self, radiance: Rgb) {
@@ -116,6 +124,7 @@ impl LanePath for BdptLane {
         let Some(m) = material(scene, &v) else { return };
         if surfaces > ctx.max_path_length {
             self.done = true;
+            self.truncated = true;
             return;
         }
         v.delta = m.is_specular();

@@ -33,6 +33,8 @@ pub struct PathLane {
     prev_point: Vec3,
     eta_scale: f32,
     path_done: bool,
+    /// Ended by l_m.
+    truncated: bool,
 }
 
 impl LanePath for PathLane {
@@ -50,6 +52,7 @@ impl LanePath for PathLane {
             prev_point: Vec3::ZERO,
             eta_scale: 1.0,
             path_done: false,
+            truncated: false,
         }
     }
     /// Starts a new camera path for pixel (`x`, `y`) with a jittered film position.
@@ -66,6 +69,7 @@ impl LanePath for PathLane {
         lane.prev_point = lane.ray.origin;
         lane.eta_scale = 1.0;
         lane.path_done = false;
+        lane.truncated = false;
     }
 
     fn ray(&self) -> Ray {
@@ -78,6 +82,10 @@ impl LanePath for PathLane {
 
     fn done(&self) -> bool {
         self.path_done
+    }
+
+    fn truncated(&self) -> bool {
+        self.truncated
     }
 
     fn add(&mut self, radiance: Rgb) {
@@ -126,6 +134,7 @@ fn shade(lane: &mut PathLane, hit: Option<Hit>, scene: &Scene, accel: &SceneAcce
     let SurfaceId::Object(oi) = surface else { return None };
     if lane.depth > max_len {
         lane.path_done = true;
+        lane.truncated = true;
         return None;
     }
     let material = &scene.materials[scene.objects[oi as usize].material as usize];

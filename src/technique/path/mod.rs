@@ -113,6 +113,10 @@ pub struct PathStats {
     pub rays: super::RayCounts,
     /// Paths completed.
     pub paths: u64,
+    /// Paths ended at l_m scattering vertices while still carrying light (the forced
+    /// termination of §3.3); over `paths`, to set against `admitted_truncation` c.
+    #[serde(default)]
+    pub truncated_paths: u64,
     /// Lane slots offered (packets traced × lanes).
     pub lane_steps: u64,
     /// Lane slots that carried a live path.
@@ -141,6 +145,7 @@ impl PathStats {
     pub(crate) fn merge(mut self, o: PathStats) -> PathStats {
         self.rays = self.rays.merge(o.rays);
         self.paths += o.paths;
+        self.truncated_paths += o.truncated_paths;
         self.lane_steps += o.lane_steps;
         self.active_lane_steps += o.active_lane_steps;
         self

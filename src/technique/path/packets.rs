@@ -55,6 +55,8 @@ pub trait LanePath: Clone {
     /// Shades the current ray's hit; `lane` is this lane's index, for its shadow tests.
     fn shade(&mut self, ctx: &Self::Context<'_>, hit: Option<Hit>, lane: usize, shadows: &mut Vec<ShadowTest>);
     fn done(&self) -> bool;
+    /// The path ended because it reached l_m, not by roulette, escape or absorption.
+    fn truncated(&self) -> bool;
     /// Adds radiance to the path's estimate.
     fn add(&mut self, radiance: Rgb);
     fn radiance(&self) -> Rgb;
@@ -179,6 +181,7 @@ pub fn trace_chunk<P: LanePath>(
                 pixel.add(lane.path.radiance());
                 pixel.count += 1.0;
                 stats.paths += 1;
+                stats.truncated_paths += lane.path.truncated() as u64;
                 lane.active = false;
                 if settings.regeneration {
                     queue.start_next(lane, ctx, scene);
