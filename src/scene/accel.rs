@@ -3,11 +3,13 @@
 //! Layout ([`AccelLayout`]): every static object and static light shape is one triangle
 //! geometry in world space, built once. Each dynamic object or dynamic light shape is its own
 //! bottom-level scene (object-space vertices) under an instance whose transform edits update.
-//! With `flat_static` (the default) the static geometries sit directly in the top-level scene,
-//! so a ray that meets them pays no instance transform and, in a scene with nothing dynamic, one
-//! traversal of one BVH; otherwise they share one bottom-level scene under an identity instance.
-//! Only the top level is recommitted when something moves; in a top level with static
-//! triangles, Embree's dynamic-scene builder keeps each unmodified geometry's own BVH.
+//! The static geometries sit either directly in the top-level scene ([`StaticLayout::Flat`]:
+//! no instance transform, and with nothing dynamic one traversal of one BVH) or in one
+//! bottom-level scene under an identity instance ([`StaticLayout::Nested`]). Only the top level
+//! is recommitted when something moves. The default, [`StaticLayout::FlatWhenStill`], is flat
+//! for a scene with nothing dynamic and nested otherwise: in a dynamic top level, Embree builds
+//! each static geometry its own low-quality BVH, and `relume bench rays` on walker measured that
+//! slower than nesting (`docs/benchmarks.md`).
 use super::{Scene, SurfaceId};
 use crate::embree::{
     CommittedScene, Device, EmbreeError, GeometryId, Hit, Intersector, Scene as EmbreeScene, SceneQuality,
@@ -16,19 +18,28 @@ use glam::{Affine3A, Vec3};
 use std::collections::HashMap;
 use std::sync::Arc;
 
+/// Where static geometry goes: see the module doc.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StaticLayout {
+    Flat,
+    Nested,
+    FlatWhenStill,
+}
+
 /// How [`SceneAccel`] lays the scene out in Embree. The default was chosen with
 /// `relume bench rays`, which measures the alternatives in one run (`docs/benchmarks.md`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct AccelLayout {
-    /// Static geometry directly in the top-level scene, rather than under one identity instance.
-    pub flat_static: bool,
-    /// The triangle test of every level.
+    pub statics: StaticLayout,
+    /// The triangle test of every level: robust, because the fast one leaks through shared
+    /// edges (`tests/embree.rs`).
     pub intersector: Intersector,
 }
 
 impl Default for AccelLayout {
     fn default() -> AccelLayout {
-        AccelLayout { flat_static: true, intersector: Intersector::Robust }
+        AccelLayout { statics: StaticLayout::FlatWhenStill, intersector: Intersector::Robust }
     }
 }
 
@@ -67,7 +78,12 @@ impl SceneAccel {
         let quality = if dynamics.is_empty() { SceneQuality::Static } else { SceneQuality::Dynamic };
         let mut top = EmbreeScene::with_intersector(device, quality, layout.intersector)?;
         let mut slots = Vec::new();
-        if layout.flat_static {
+        let flat = match layout.statics {
+            StaticLayout::Flat => true,
+            StaticLayout::Nested => false,
+            StaticLayout::FlatWhenStill => dynamics.is_empty(),
+        };
+        if flat {
             for part in &statics {
                 let g = top.attach_triangles(&part.positions, &part.triangles)?;
                 set_slot(&mut slots, g, Slot::Surface(part.id));

@@ -3,9 +3,10 @@
 //! 1. Raw Embree throughput on the scene: coherent primary rays in 16-wide packets, incoherent
 //!    closest-hit rays (cosine-distributed from first hits) and incoherent occlusion rays (from
 //!    first hits to light samples), single rays on every worker. It is measured on each
-//!    [`AccelLayout`]: static geometry nested under an identity instance or flat in the top
-//!    level, robust or fast triangle test, and on a frozen copy with every surface flat (the
-//!    ceiling: one BVH, no instances), so the default layout's choice is a measurement.
+//!    [`AccelLayout`]: the default (`auto`: flat when nothing is dynamic, else nested), static
+//!    geometry nested under an identity instance or flat in the top level, robust or fast
+//!    triangle test, and on a frozen copy with every surface static and flat (the ceiling: one
+//!    BVH, no instances), so the default layout's choice is a measurement.
 //! 2. The `path` technique's achieved ray rate, as a fraction of the raw incoherent rate.
 //! 3. Path regeneration against none at packet widths 1, 8 and 16 on dark (ρ × 0.5), normal and
 //!    bright (ρ_S ≈ 0.8) variants of the scene, as in Novák et al. (2010), Table 1, for `path`
@@ -16,7 +17,7 @@ use super::SceneArgs;
 use crate::core::{offset_ray_origin, sampling, Rng, ShadingFrame};
 use crate::embree::{Device, Intersector, Ray};
 use crate::engine::{thread_pool, Session};
-use crate::scene::accel::AccelLayout;
+use crate::scene::accel::{AccelLayout, StaticLayout};
 use crate::scene::{Scene, SceneAccel};
 use crate::technique::bdpt::BdptConfig;
 use crate::technique::path::{max_path_length, PathConfig};
@@ -131,13 +132,13 @@ fn incoherent_rays(scene: &Scene, accel: &SceneAccel) -> (Vec<Ray>, Vec<Ray>) {
 fn raw_layouts() -> Vec<(&'static str, bool, AccelLayout)> {
     let mut out = vec![("default", false, AccelLayout::default())];
     for intersector in [Intersector::Robust, Intersector::Fast] {
-        for (name, flat_static) in [("nested", false), ("flat", true)] {
-            let layout = AccelLayout { flat_static, intersector };
+        for (name, statics) in [("nested", StaticLayout::Nested), ("flat", StaticLayout::Flat)] {
+            let layout = AccelLayout { statics, intersector };
             if layout != AccelLayout::default() {
                 out.push((name, false, layout));
             }
         }
-        out.push(("frozen", true, AccelLayout { flat_static: true, intersector }));
+        out.push(("frozen", true, AccelLayout { statics: StaticLayout::Flat, intersector }));
     }
     out
 }
@@ -321,7 +322,11 @@ pub fn print_table(r: &RaysReport) {
         println!(
             "  {:<8} {:<7} {:<10} {:>26.2} {:>19.2} {:>21.2}",
             row.accel,
-            if row.layout.flat_static { "flat" } else { "nested" },
+            match row.layout.statics {
+                StaticLayout::Flat => "flat",
+                StaticLayout::Nested => "nested",
+                StaticLayout::FlatWhenStill => "auto",
+            },
             format!("{:?}", row.layout.intersector).to_lowercase(),
             row.coherent_primary_mrays,
             row.incoherent_closest_mrays,

@@ -194,7 +194,7 @@ pub fn measure(args: &ParticlesArgs) -> Result<ParticlesReport> {
 pub fn print_table(r: &ParticlesReport) {
     let b = &r.build;
     println!(
-        "relume bench particles: {} at {}x{}, {} threads; {} area particles (ΔA {:.3e} m²), {} radiance particles, n_b = {}",
+        "relume bench particles: {} at {}x{}, {} threads; {} area particles (ΔA {:.3e} square scene units), {} radiance particles, n_b = {}",
         r.scene, r.width, r.height, r.threads, b.area_particles, b.particle_area, b.radiance_particles, b.bounces
     );
     println!(
