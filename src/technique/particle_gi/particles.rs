@@ -41,6 +41,34 @@ fn diffuse_objects(scene: &Scene) -> Vec<usize> {
     (0..scene.objects.len()).filter(|&i| !scene.materials[scene.objects[i].material as usize].is_specular()).collect()
 }
 
+/// Whole points per object from their areas: the largest-remainder rule, so the counts add up
+/// to `wanted`, then at least one point (two particles, one per side) for every object with
+/// area, so a small object never goes black (PG-1): links that hit it find particles there.
+fn points_per_object(areas: &[f64], wanted: f64) -> Vec<u64> {
+    let total: f64 = areas.iter().sum();
+    let shares: Vec<f64> = areas.iter().map(|a| wanted * a / total).collect();
+    let mut points = largest_remainder(&shares);
+    for (p, &a) in points.iter_mut().zip(areas) {
+        if a > 0.0 {
+            *p = (*p).max(1);
+        }
+    }
+    points
+}
+
+/// Rounds `shares` to whole numbers that sum to their (whole) total: floors, then one more for
+/// the largest remainders.
+fn largest_remainder(shares: &[f64]) -> Vec<u64> {
+    let mut out: Vec<u64> = shares.iter().map(|s| s.floor() as u64).collect();
+    let mut order: Vec<usize> = (0..shares.len()).collect();
+    order.sort_by(|&a, &b| (shares[b] - shares[b].floor()).total_cmp(&(shares[a] - shares[a].floor())).then(a.cmp(&b)));
+    let missing = (shares.iter().sum::<f64>().round() as u64).saturating_sub(out.iter().sum());
+    for &k in order.iter().take(missing as usize) {
+        out[k] += 1;
+    }
+    out
+}
+
 /// Points (each two particles, one per side) for `count` particles or one per `area` m², over
 /// `total` m² of diffuse surface.
 fn planned_points(count: u32, area: Option<f32>, total: f64) -> f64 {
@@ -84,17 +112,7 @@ impl AreaParticles {
             return out;
         }
         let points_wanted = planned_points(count, area, total);
-        // Whole points per object by the largest-remainder rule, so counts add up exactly.
-        let shares: Vec<f64> = areas.iter().map(|a| points_wanted * a / total).collect();
-        let mut points: Vec<u64> = shares.iter().map(|s| s.floor() as u64).collect();
-        let mut order: Vec<usize> = (0..shares.len()).collect();
-        order.sort_by(|&a, &b| {
-            (shares[b] - shares[b].floor()).total_cmp(&(shares[a] - shares[a].floor())).then(a.cmp(&b))
-        });
-        let missing = points_wanted as u64 - points.iter().sum::<u64>();
-        for &k in order.iter().take(missing as usize) {
-            points[k] += 1;
-        }
+        let points = points_per_object(&areas, points_wanted);
         let placed: u64 = points.iter().sum();
         out.area = (total / placed.max(1) as f64) as f32;
         for ((&object, &n), &area) in diffuse.iter().zip(&points).zip(&areas) {
@@ -357,4 +375,27 @@ fn slot(c: [i32; 3], slots: usize) -> usize {
         ^ (c[1] as u32).wrapping_mul(19_349_663)
         ^ (c[2] as u32).wrapping_mul(83_492_791);
     h as usize & (slots - 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_object_with_area_gets_a_point_however_small() {
+        // PG-1: 20 points over a room of 64 m² and a box of 0.5 m² (0.8% of the area): its share
+        // is 0.16 points, and the rounding alone gives it none (checked here, so the case is a
+        // real one), which left every link that hits it without light.
+        let areas = [32.0, 16.0, 16.0, 0.5];
+        let wanted = 20.0;
+        let total: f64 = areas.iter().sum();
+        let shares: Vec<f64> = areas.iter().map(|a| wanted * a / total).collect();
+        let rounded = largest_remainder(&shares);
+        assert_eq!(rounded.iter().sum::<u64>(), 20);
+        assert_eq!(rounded[3], 0, "the rounding alone must starve the small box: {rounded:?}");
+        let points = points_per_object(&areas, wanted);
+        assert!(points.iter().all(|&p| p >= 1), "{points:?}");
+        assert_eq!(&points[..3], &rounded[..3], "the large objects keep their rounded counts");
+        assert_eq!(points_per_object(&[1.0, 0.0], 4.0), vec![4, 0], "an object without area gets none");
+    }
 }
