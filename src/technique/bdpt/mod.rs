@@ -41,15 +41,21 @@
 //! | `permute` | true | pick a random light subpath at every eye bounce (§3.4) |
 //!
 //! # Bias and consistency
-//! Unbiased except for the truncation at l_m surface vertices (as `path`). Strategies with
-//! t = 1 (light subpaths splatted onto the camera) are not used; the weights are normalised over
-//! the strategies that are, so nothing is lost but their variance reduction for caustics seen
-//! directly.
+//! Biased in two ways. (a) The truncation at l_m surface vertices, as `path`. (b) Strategies
+//! with t = 1 (light subpath vertices connected to the camera and splatted onto the film) are
+//! not built, and nothing else can make a path whose only non-specular connection would be
+//! to the camera: light from a point or spot light through a specular chain onto a diffuse
+//! surface seen by the camera (the caustic of a glass sphere under a point light) is missing,
+//! a bias, not just noise. For every other path the weights are normalised over the strategies
+//! that are used (t ≥ 2), which keeps those unbiased.
+//!
+//! Russian roulette on light subpaths uses the product of BSDF weights since the light, so it
+//! does not depend on the light's power or the scene's units (`vertex.rs::light_subpath`).
 //!
 //! # Failure modes
-//! Without t = 1, caustics seen directly (light → specular → diffuse → camera) are found only by
-//! eye paths and stay noisy; point lights reached only through mirrors are never found (no
-//! strategy can make those paths); a small `light_batch` correlates the noise between pixels.
+//! Without t = 1, caustics of area lights seen directly (light → specular → diffuse → camera)
+//! are found only by eye paths and stay noisy, and those of point and spot lights are missing
+//! (see Bias); a small `light_batch` correlates the noise between pixels.
 mod lane;
 mod vertex;
 
