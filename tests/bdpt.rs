@@ -28,16 +28,18 @@ fn furnace_matches_the_analytic_radiance_within_one_percent() {
 }
 
 #[test]
-fn cornell_box_matches_the_path_reference_with_and_without_permutation() {
+fn cornell_box_matches_the_path_reference_with_and_without_permutation_and_batches() {
     // Property: light-subpath permutation changes which light subpath an eye vertex meets, never
     // the expectation: both variants converge to the path tracer's image.
     let mut scene = load("cornell-box.json");
     scene.set_resolution(32, 32);
     let reference = render(scene.clone(), TechniqueConfig::Path(path(512)), 3, 1, 2).image;
-    for permute in [true, false] {
-        let c = BdptConfig { permute, ..bdpt(128) };
+    // So does one light subpath per eye path (each eye path's own) instead of a shared batch.
+    for (permute, light_per_eye_path) in [(true, false), (false, false), (false, true)] {
+        let c = BdptConfig { permute, light_per_eye_path, ..bdpt(128) };
         let img = render(scene.clone(), TechniqueConfig::Bdpt(c), 5, 1, 2).image;
-        assert_matches_reference(&format!("bdpt permute {permute}"), &img, &reference, CORNELL_TOLERANCE);
+        let label = format!("bdpt permute {permute}, light per eye path {light_per_eye_path}");
+        assert_matches_reference(&label, &img, &reference, CORNELL_TOLERANCE);
     }
     // Negative control: bdpt cut to two-vertex paths (no indirect light) fails the same bound.
     let broken = BdptConfig { max_path_length: Some(2), ..BdptConfig { spp: 2, ..Default::default() } };

@@ -73,9 +73,12 @@ impl TechniqueConfig {
                 )
             }
             TechniqueConfig::ParticleGi(c) => format!("particle_gi:particles={}", c.particles),
-            TechniqueConfig::Bdpt(c) => {
-                format!("bdpt:spp={}{}", c.spp, if c.permute { "" } else { ":permute=false" })
-            }
+            TechniqueConfig::Bdpt(c) => format!(
+                "bdpt:spp={}{}{}",
+                c.spp,
+                if c.light_per_eye_path { ":light_per_eye_path=true" } else { "" },
+                if c.permute { "" } else { ":permute=false" }
+            ),
             TechniqueConfig::PhotonReuse(c) => {
                 let mode = serde_json::to_value(c.reuse).ok().and_then(|v| v.as_str().map(str::to_string));
                 let mode = mode.unwrap_or_default();

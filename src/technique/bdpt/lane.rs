@@ -20,6 +20,9 @@ pub struct BdptContext<'a> {
     pub batch: &'a [Vec<Vertex>],
     /// Pick a light subpath at random at every bounce (§3.4), or keep one per eye path.
     pub permute: bool,
+    /// With one light subpath per eye path: the first pixel of the queue, so that pixel p's own
+    /// subpath is `batch[p - first]`. `None`: a shared batch, each eye path's own picked at random.
+    pub own_from: Option<usize>,
 }
 
 #[derive(Clone)]
@@ -74,7 +77,9 @@ impl LanePath for BdptLane {
             delta: false,
         });
         self.radiance = Rgb::BLACK;
-        self.own_light_path = (self.rng.next_u32() as usize) % ctx.batch.len().max(1);
+        let drawn = (self.rng.next_u32() as usize) % ctx.batch.len().max(1);
+        let pixel = y * ctx.scene.camera.width as usize + x;
+        self.own_light_path = ctx.own_from.map_or(drawn, |first| pixel - first);
         self.done = false;
         self.truncated = false;
     }
