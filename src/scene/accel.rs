@@ -15,6 +15,7 @@ use crate::embree::{
     CommittedScene, Device, EmbreeError, GeometryId, Hit, Intersector, Scene as EmbreeScene, SceneQuality,
 };
 use glam::{Affine3A, Vec3};
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -52,11 +53,12 @@ enum Slot {
     StaticInstance(Vec<SurfaceId>),
 }
 
-/// One surface's triangles in the space they are stored in.
-struct Part {
+/// One surface's triangles in the space they are stored in, borrowed from the scene where it
+/// holds them that way.
+struct Part<'a> {
     id: SurfaceId,
-    positions: Vec<Vec3>,
-    triangles: Vec<[u32; 3]>,
+    positions: Cow<'a, [Vec3]>,
+    triangles: Cow<'a, [[u32; 3]]>,
     world_from_object: Affine3A,
 }
 
@@ -177,15 +179,15 @@ impl SceneAccel {
 
 /// Every intersectable surface, static ones in world space and dynamic ones in object space
 /// with their current transforms: (static, dynamic).
-fn parts(scene: &Scene) -> (Vec<Part>, Vec<Part>) {
+fn parts(scene: &Scene) -> (Vec<Part<'_>>, Vec<Part<'_>>) {
     let (mut statics, mut dynamics) = (Vec::new(), Vec::new());
     for (i, o) in scene.objects.iter().enumerate() {
         let id = SurfaceId::Object(i as u32);
         if o.dynamic {
-            let (positions, triangles) = (o.mesh.positions.clone(), o.mesh.triangles.clone());
+            let (positions, triangles) = (Cow::from(&o.mesh.positions[..]), Cow::from(&o.mesh.triangles[..]));
             dynamics.push(Part { id, positions, triangles, world_from_object: o.world_from_object });
         } else {
-            let (positions, triangles) = (o.world_positions.clone(), o.mesh.triangles.clone());
+            let (positions, triangles) = (Cow::from(&o.world_positions[..]), Cow::from(&o.mesh.triangles[..]));
             statics.push(Part { id, positions, triangles, world_from_object: Affine3A::IDENTITY });
         }
     }
@@ -194,11 +196,12 @@ fn parts(scene: &Scene) -> (Vec<Part>, Vec<Part>) {
         let id = SurfaceId::Light(i as u32);
         if l.dynamic {
             let world_from_object = scene.desc().lights[i].transform.world_from_object();
-            let (positions, triangles) = (mesh.positions.clone(), mesh.triangles.clone());
+            let (positions, triangles) = (Cow::from(&mesh.positions[..]), Cow::from(&mesh.triangles[..]));
             dynamics.push(Part { id, positions, triangles, world_from_object });
         } else {
-            let triangles = (0..mesh.triangles.len() as u32).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect();
-            let positions = (0..mesh.triangles.len()).flat_map(|t| scene.triangle(id, t as u32)).collect();
+            let triangles =
+                Cow::Owned((0..mesh.triangles.len() as u32).map(|t| [3 * t, 3 * t + 1, 3 * t + 2]).collect());
+            let positions = Cow::Owned((0..mesh.triangles.len()).flat_map(|t| scene.triangle(id, t as u32)).collect());
             statics.push(Part { id, positions, triangles, world_from_object: Affine3A::IDENTITY });
         }
     }
