@@ -183,3 +183,90 @@ fn adaptive_supersampling_resamples_only_contrasted_pixels() {
     assert_eq!(st.camera_rays, 32 * 32 + 4 * st.supersampled_pixels);
     assert_matches_reference("particle_gi supersampled", &frame.image, &reference, CORNELL_TOLERANCE);
 }
+
+/// Largest per-channel difference between `a` and `k·b`, relative to `b`'s brightest channel.
+fn scaled_difference(a: &relume::film::LinearImage, b: &relume::film::LinearImage, k: f32) -> f32 {
+    let peak = b.pixels.iter().map(|p| p.max_component()).fold(0.0f32, f32::max).max(f32::MIN_POSITIVE);
+    let worst = a
+        .pixels
+        .iter()
+        .zip(&b.pixels)
+        .map(|(x, y)| (x.r - k * y.r).abs().max((x.g - k * y.g).abs()).max((x.b - k * y.b).abs()))
+        .fold(0.0f32, f32::max);
+    worst / (k * peak)
+}
+
+#[test]
+fn a_dimmed_light_scales_the_frame_without_rays_or_walks() {
+    // Property: every term of the frame is linear in the lamp's intensity, so dimming it by k
+    // is applied as a scale of its share of the field and of the cached estimates: no
+    // emission rays, no scattering walks, no links. The frame equals, to float rounding
+    // (1e-4 of the peak), the frame of a twin that recomputes its lighting stage for the same
+    // lamp (it reaches the same state by a move, which re-emits), and k times an undimmed
+    // twin's. All three render tick 1 with the same camera jitter; a point lamp has no light
+    // samples to differ. Negative control: the undimmed frame times 1.01·k fails.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    let lamp_at = [0.0, 1.7, 0.3];
+    let lamp = |translation: [f32; 3], intensity: f32| {
+        let transform = Trs { translation, rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0; 3] };
+        let emitter = relume::scene::EmitterDesc::Point { intensity: relume::core::Rgb::splat(intensity) };
+        vec![Edit::Light { name: "lamp".into(), transform: Some(transform), emitter: Some(emitter) }]
+    };
+    pool.install(|| {
+        let c = TechniqueConfig::ParticleGi(config(6_000));
+        let session = || Session::new(room(), &c, 3, &device).expect("session");
+        let (mut dimmed, mut recomputed, mut undimmed) = (session(), session(), session());
+        let k = 0.4;
+        dimmed.tick().unwrap();
+        for s in [&mut recomputed, &mut undimmed] {
+            s.queue_edits(lamp([0.5, 1.6, 0.6], 4.0)).unwrap();
+            s.tick().unwrap();
+        }
+        dimmed.queue_edits(lamp(lamp_at, 4.0 * k)).unwrap();
+        recomputed.queue_edits(lamp(lamp_at, 4.0 * k)).unwrap();
+        undimmed.queue_edits(lamp(lamp_at, 4.0)).unwrap();
+        let (a, b, u) = (dimmed.tick().unwrap(), recomputed.tick().unwrap(), undimmed.tick().unwrap());
+        let (sa, sb) = (stats(&a), stats(&b));
+        eprintln!("dimmed: {sa:?}\nrecomputed: {sb:?}");
+        assert_eq!((sa.emission_rays, sa.scatter_deposits, sa.links_traced), (0, 0, 0), "{sa:?}");
+        assert_eq!(sa.lights_rescaled, 1);
+        assert!(sb.emission_rays > 0 && sb.scatter_deposits > 0, "the twin did not recompute: {sb:?}");
+        assert!(u.image.mean().g > 0.0);
+        let (to_twin, to_scaled) = (scaled_difference(&a.image, &b.image, 1.0), scaled_difference(&a.image, &u.image, k));
+        let control = scaled_difference(&a.image, &u.image, 1.01 * k);
+        eprintln!("relative difference: to the recomputed twin {to_twin:.2e}, to k × undimmed {to_scaled:.2e}, control {control:.2e}");
+        assert!(to_twin < 1e-4 && to_scaled < 1e-4, "{to_twin} {to_scaled}");
+        assert!(control >= 1e-4, "the negative control passed: {control}");
+    });
+}
+
+#[test]
+fn no_light_crosses_a_contact() {
+    // Property: a closed box standing on a lit floor is dark inside: no light reaches its
+    // inner faces, and estimation lists take particles of the radiance particle's own object
+    // only, so the floor's lit particles, within R of the box's bottom and facing the same way
+    // as its inner side, add nothing. A camera inside sees exactly 0. (The unit test
+    // `radiance::tests::the_floor_lies_within_the_lists_reach_of_the_box_bottom` is the
+    // negative control: without the object rule those floor particles would be admitted.)
+    let scene = scene_from_json(serde_json::json!({
+        "camera": {"position": [0.05, 0.3, -0.1], "look_at": [0.1, 0.0, 0.15], "vfov_deg": 120, "resolution": [24, 24]},
+        "materials": {"white": {"type": "diffuse", "reflectance": [0.8, 0.8, 0.8]}},
+        "objects": [
+            {"name": "floor", "shape": {"type": "quad"}, "material": "white",
+             "transform": {"rotation": FACE_UP, "scale": [2, 2, 1]}},
+            {"name": "crate", "shape": {"type": "box"}, "material": "white",
+             "transform": {"translation": [0, 0.302, 0], "scale": [0.3, 0.3, 0.3]}}
+        ],
+        "lights": [{"name": "lamp", "emitter": {"type": "point", "intensity": [6, 6, 6]},
+                    "transform": {"translation": [1.0, 1.5, -0.8]}}]
+    }));
+    let frame = render(scene, TechniqueConfig::ParticleGi(config(6_000)), 3, 1, 2);
+    let st = stats(&frame);
+    eprintln!(
+        "inside the crate: peak {:?}; {st:?}",
+        frame.image.pixels.iter().map(|p| p.max_component()).fold(0.0f32, f32::max)
+    );
+    assert!(st.radiance_particles_estimated > 0 && st.particles_lit > 0, "{st:?}");
+    assert!(frame.image.pixels.iter().all(|p| p.is_black()), "light leaked into the crate");
+}

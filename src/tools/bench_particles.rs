@@ -61,6 +61,8 @@ pub struct ParticlesReport {
     pub build_tick_ms: f64,
     pub relight: ParticleStats,
     pub relight_tick_ms: f64,
+    /// The relight tick's phases (update, render, resolve, ...).
+    pub relight_phases: crate::engine::PhaseTimes,
     pub whitted_ms: f64,
     /// Relight tick over the Whitted frame (goal ≤ 1.5; the paper 1.6–3.2).
     pub relight_ratio: f64,
@@ -185,6 +187,7 @@ pub fn measure(args: &ParticlesArgs) -> Result<ParticlesReport> {
         relight_ratio: relight_tick_ms / relit.trace_ms.max(1e-9),
         whitted_ms: relit.trace_ms,
         relight_tick_ms,
+        relight_phases: relight_frame.stats.times,
         build,
         relight: relit,
         link_update,
@@ -215,8 +218,13 @@ pub fn print_table(r: &ParticlesReport) {
         s.gathering_ms,
         s.area_particles_gathered,
         s.estimation_ms,
-        s.radiance_particles_needed,
+        s.radiance_particles_estimated,
         s.final_ms
+    );
+    let p = &r.relight_phases;
+    println!(
+        "  relight phases: commit {:.1}, update {:.1}, render {:.1}, resolve {:.1} ms",
+        p.commit_ms, p.update_ms, p.render_ms, p.resolve_ms
     );
     println!("  Whitted frame {:.1} ms; relight / Whitted = {:.2} (goal ≤ 1.5)", r.whitted_ms, r.relight_ratio);
     if let Some(u) = &r.link_update {

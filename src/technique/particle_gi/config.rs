@@ -1,7 +1,7 @@
 //! `particle_gi`'s configuration (validated as the service receives it) and its per-tick
 //! figures, laid out like Chang et al.'s Tables 1 and 2. Lengths are fractions of the particle
 //! spacing √ΔA unless stated; times in milliseconds; memory in bytes.
-use super::particles;
+use super::{lighting, particles};
 use crate::scene::Scene;
 use crate::technique::budget::{product_sum, MemoryEstimate};
 use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription};
@@ -62,13 +62,18 @@ impl Default for ParticleGiConfig {
     }
 }
 
+const RGB_BYTES: u64 = std::mem::size_of::<crate::core::Rgb>() as u64;
+
 /// Most area particles a scene may hold.
 pub const MAX_PARTICLES: u32 = 4_000_000;
 
 impl ParticleGiConfig {
     /// Resident memory on `scene` (`budget.rs`): the particles `particles` or `particle_area`
-    /// gives there, their area estimation's temporary samples, and both link sets (an end and
-    /// a distance per link, plus what tracing them holds while building). Refuses more than
+    /// gives there, their area estimation's temporary samples, both link sets (an end and a
+    /// distance per link, plus what tracing them holds while building), the field's direct
+    /// flux and radiance per lighting share, and the estimate cache (about one radiance
+    /// particle per area particle at the default subtriangle edge, both sides, one estimate
+    /// per share and a flag each). Refuses more than
     /// [`MAX_PARTICLES`] particles, which `particle_area` alone cannot bound.
     pub fn resident_estimate(&self, scene: &Scene) -> Result<MemoryEstimate, TechniqueError> {
         let field = if self.particle_area.is_some() { "particle_area" } else { "particles" };
@@ -81,12 +86,15 @@ impl ParticleGiConfig {
         }
         let particles = planned as u64;
         let links_each = u64::from(self.scatter_links.pow(2) + self.gather_links.pow(2));
+        let shares = lighting::share_count(scene.lights.len()) as u64;
         product_sum(
             field,
             &[
                 (particles, particles::BYTES_PER_PARTICLE),
                 (particles / 2, particles::SAMPLING_BYTES_PER_POINT),
                 (particles * links_each, 4 + 2 + 8),
+                (particles * shares, 2 * RGB_BYTES),
+                (2 * particles, shares * RGB_BYTES + 1),
             ],
         )
     }
@@ -151,15 +159,20 @@ pub struct ParticleStats {
     pub links_total: u64,
     pub links_traced: u64,
     pub link_box_tests: u64,
-    /// Radiance particles hit this tick, estimation lists built this tick and cached.
-    pub radiance_particles_needed: u64,
+    /// Radiance particles estimated this tick (those a camera sample needed with no cached
+    /// estimate), estimation lists built this tick, and lists and estimates cached.
+    pub radiance_particles_estimated: u64,
     pub lists_built: u64,
     pub lists_cached: u64,
+    pub estimates_cached: u64,
     /// Area particles gathered (those in the needed lists).
     pub area_particles_gathered: u64,
-    /// Particles lit directly, and scattering deposits.
+    /// Particles lit directly by the lights whose share was recomputed this tick, and their
+    /// scattering deposits (0 when the lighting stage did not run).
     pub particles_lit: u64,
     pub scatter_deposits: u64,
+    /// Lights whose intensity edit was applied as a scale of their share (no rays, no walks).
+    pub lights_rescaled: u64,
     pub supersampled_pixels: u64,
     pub camera_rays: u64,
     pub specular_rays: u64,
@@ -175,7 +188,8 @@ pub struct ParticleStats {
     pub gathering_ms: f64,
     pub estimation_ms: f64,
     pub final_ms: f64,
-    /// `particles` (with the tessellation), `scatter_links`, `gather_links`, `lists`, `grid`.
+    /// `particles` (with the tessellation), `scatter_links`, `gather_links`, `lists`, `grid`,
+    /// `estimates`, `field`.
     pub memory: crate::technique::ResidentMemory,
 }
 

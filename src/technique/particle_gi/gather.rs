@@ -1,33 +1,110 @@
-//! Indirect light gathering and radiance estimation (Chang et al. §4.3.1–4.3.2), run each tick
-//! only for what the camera needs.
+//! Indirect light gathering and radiance estimation (Chang et al. §4.3.1–4.3.2), run only for
+//! radiance particles the camera needs and whose estimate is not cached.
 //!
 //! Gathering: Ẽ_i = π/N Σ_k L(end_k) over particle i's N gathering links (cosine-weighted, so
 //! the cosine and the pdf cancel); links ending nowhere or on specular surfaces add nothing.
 //! Ẽ is indirect irradiance only: the links carry light reflected by surfaces, and emitters are
 //! not linked. Estimation at a radiance particle: Σφ̃/ΣΔA over its list, φ̃ = Ẽ·ΔA (W/m²);
 //! the shading point multiplies by ρ/π.
-use super::lighting::FluxField;
+//!
+//! Beyond the paper, estimates are cached per radiance particle and per lighting share
+//! (`lighting.rs`), indexed directly by the radiance key (keys are dense: `id << 1 | side`
+//! below twice the tessellation's count). They hold while the field and the lists do: a
+//! still view or a camera move estimates only the radiance particles it sees for the first
+//! time, and an intensity edit scales its share's estimates like the field.
+use super::lighting::Lighting;
 use super::links::{LinkSet, NON_DIFFUSE};
 use super::radiance::{EstimationLists, RadianceKey};
 use crate::core::Rgb;
 use rayon::prelude::*;
 use std::f32::consts::PI;
 
-/// Ẽ for each particle in `needed` (a dense array, zero elsewhere).
-pub fn gather(links: &LinkSet, field: &FluxField, needed: &[u32], particles: usize) -> Vec<Rgb> {
-    let per = links.per_particle();
+/// Cached estimates Ē (W/m²) per radiance key and share (key k's share g at `k * shares + g`).
+#[derive(Clone, Debug, Default)]
+pub struct Estimates {
+    shares: usize,
+    values: Vec<Rgb>,
+    valid: Vec<bool>,
+}
+
+impl Estimates {
+    /// An empty cache for radiance particles `0..radiance_particles` (both sides each).
+    pub fn new(radiance_particles: u64, shares: usize) -> Estimates {
+        let keys = 2 * radiance_particles as usize;
+        Estimates { shares, values: vec![Rgb::BLACK; keys * shares], valid: vec![false; keys] }
+    }
+
+    /// Forgets every estimate (the field or the lists changed).
+    pub fn invalidate(&mut self) {
+        self.valid.iter_mut().for_each(|v| *v = false);
+    }
+
+    /// Multiplies share `g` by `factor`, as [`Lighting::scale`] does the field.
+    pub fn scale(&mut self, g: usize, factor: Rgb) {
+        for k in (g..self.values.len()).step_by(self.shares) {
+            self.values[k] *= factor;
+        }
+    }
+
+    /// The estimate of `key`, summed over the shares, if cached.
+    pub fn get(&self, key: RadianceKey) -> Option<Rgb> {
+        let k = key as usize;
+        self.valid
+            .get(k)
+            .copied()
+            .unwrap_or(false)
+            .then(|| self.values[k * self.shares..(k + 1) * self.shares].iter().fold(Rgb::BLACK, |s, &v| s + v))
+    }
+
+    /// The distinct keys of `keys` (each with what goes with it) that have no cached
+    /// estimate, in key order.
+    pub fn missing<T>(&self, keys: impl Iterator<Item = (RadianceKey, T)>) -> Vec<(RadianceKey, T)> {
+        let mut missing: Vec<(RadianceKey, T)> =
+            keys.filter(|(k, _)| !self.valid.get(*k as usize).copied().unwrap_or(true)).collect();
+        missing.sort_unstable_by_key(|(k, _)| *k);
+        missing.dedup_by_key(|(k, _)| *k);
+        missing
+    }
+
+    /// Stores the estimates of `keys` (`values` as [`estimate`] returns them).
+    pub fn store(&mut self, keys: &[RadianceKey], values: &[Rgb]) {
+        for (n, &key) in keys.iter().enumerate() {
+            let k = key as usize;
+            self.values[k * self.shares..(k + 1) * self.shares]
+                .copy_from_slice(&values[n * self.shares..(n + 1) * self.shares]);
+            self.valid[k] = true;
+        }
+    }
+
+    pub fn cached(&self) -> u64 {
+        self.valid.iter().filter(|&&v| v).count() as u64
+    }
+
+    pub fn memory_bytes(&self) -> u64 {
+        (self.values.len() * std::mem::size_of::<Rgb>() + self.valid.len()) as u64
+    }
+}
+
+/// Ẽ per share for each particle in `needed` (dense, particle i's share g at
+/// `i * shares + g`, zero elsewhere).
+pub fn gather(links: &LinkSet, lighting: &Lighting, needed: &[u32], particles: usize) -> Vec<Rgb> {
+    let (per, shares) = (links.per_particle(), lighting.shares);
     let values: Vec<Rgb> = needed
         .par_iter()
-        .map(|&i| {
+        .flat_map_iter(|&i| {
             let ends = &links.ends[i as usize * per..(i as usize + 1) * per];
-            let sum =
-                ends.iter().filter(|&&e| e < NON_DIFFUSE).fold(Rgb::BLACK, |s, &e| s + field.radiance[e as usize]);
-            sum * (PI / per as f32)
+            (0..shares).map(move |g| {
+                let sum = ends
+                    .iter()
+                    .filter(|&&e| e < NON_DIFFUSE)
+                    .fold(Rgb::BLACK, |s, &e| s + lighting.radiance[e as usize * shares + g]);
+                sum * (PI / per as f32)
+            })
         })
         .collect();
-    let mut dense = vec![Rgb::BLACK; particles];
-    for (&i, v) in needed.iter().zip(values) {
-        dense[i as usize] = v;
+    let mut dense = vec![Rgb::BLACK; particles * shares];
+    for (&i, v) in needed.iter().zip(values.chunks_exact(shares)) {
+        dense[i as usize * shares..(i as usize + 1) * shares].copy_from_slice(v);
     }
     dense
 }
@@ -43,21 +120,28 @@ pub fn particles_to_gather(lists: &EstimationLists, keys: &[RadianceKey], partic
     (0..particles as u32).filter(|&i| wanted[i as usize]).collect()
 }
 
-/// Ē (W/m²) at each radiance particle of `keys`, in the same order: Σ Ẽ_m ΔA_m / Σ ΔA_m over
-/// its list.
-pub fn estimate(lists: &EstimationLists, keys: &[RadianceKey], gathered: &[Rgb], areas: &[f32]) -> Vec<Rgb> {
+/// Ē (W/m²) per share at each radiance particle of `keys` (key n's share g at
+/// `n * shares + g`): Σ Ẽ_m ΔA_m / Σ ΔA_m over its list.
+pub fn estimate(
+    lists: &EstimationLists,
+    keys: &[RadianceKey],
+    gathered: &[Rgb],
+    areas: &[f32],
+    shares: usize,
+) -> Vec<Rgb> {
     keys.par_iter()
-        .map(|k| {
-            let (flux, area) = lists.lists.get(k).map_or((Rgb::BLACK, 0.0), |l| {
-                l.particles.iter().fold((Rgb::BLACK, 0.0f32), |(f, a), &i| {
-                    (f + gathered[i as usize] * areas[i as usize], a + areas[i as usize])
-                })
-            });
-            if area > 0.0 {
-                flux / area
-            } else {
-                Rgb::BLACK
-            }
+        .flat_map_iter(|k| {
+            let list = lists.lists.get(k).map_or(&[][..], |l| &l.particles[..]);
+            let area: f32 = list.iter().map(|&i| areas[i as usize]).sum();
+            (0..shares).map(move |g| {
+                let flux =
+                    list.iter().fold(Rgb::BLACK, |f, &i| f + gathered[i as usize * shares + g] * areas[i as usize]);
+                if area > 0.0 {
+                    flux / area
+                } else {
+                    Rgb::BLACK
+                }
+            })
         })
         .collect()
 }

@@ -14,11 +14,16 @@
 //!    are dropped.
 //! 2. Lighting stage (§4.2; when lights, materials or geometry change, `lighting.rs`):
 //!    emission to the particles, the first bounce through all scattering links, n_b more
-//!    bounces through one random link each, and L = ρ/π · φ/ΔA.
+//!    bounces through one random link each, and L = ρ/π · φ/ΔA. Beyond the paper, the field
+//!    is kept per light (up to 8 shares): an intensity or colour edit scales its light's share
+//!    (no rays), a light move redoes that share only, a material edit re-scatters the kept
+//!    direct flux without emission rays, and a tick without such edits does no lighting work.
 //! 3. Ray-tracing stage (§4.3, every tick): camera samples through mirrors and glass to their
 //!    diffuse hits (the preliminary trace, which marks the radiance particles needed); lists
 //!    are built for needed radiance particles that have none; gathering through the 16 × 16
-//!    links for the area particles in those lists and radiance estimation (`gather.rs`); final
+//!    links for the area particles in those lists and radiance estimation (`gather.rs`), only
+//!    for radiance particles without a cached estimate (the cache holds while the field and
+//!    the lists do, and scales with an intensity edit); final
 //!    shading with direct light by shadow rays plus ρ/π times the indirect irradiance
 //!    interpolated over the hit's subtriangle. Optional adaptive supersampling re-samples
 //!    pixels that differ from a neighbour by more than a relative contrast.
@@ -67,11 +72,12 @@ use crate::film::Film;
 use crate::scene::edits::{Aabb, SceneDelta};
 use crate::scene::{Scene, SurfaceId};
 use crate::technique::box_tree::{widened, BoxTree, BOX_SLACK};
+use gather::Estimates;
 use glam::Vec3;
-use lighting::FluxField;
+use lighting::{Inputs, Lighting, LightingWork};
 use links::LinkSet;
 use particles::{AreaParticles, ParticleGrid};
-use radiance::{EstimationLists, RadianceKey, Tessellation, Vertex};
+use radiance::{EstimationLists, RadianceKey, Tessellation};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
 use std::time::Instant;
@@ -99,11 +105,31 @@ struct Geometry {
     scales: Vec<Vec3>,
 }
 
+/// The radiance particles around a camera sample's diffuse hit, on the side it sees.
+fn sample_corners(tessellation: &Tessellation, s: &Shaded) -> Option<[(RadianceKey, radiance::Vertex, f32); 3]> {
+    let hit = s.sample.hit.as_ref()?;
+    let side = u8::from(hit.n.dot(hit.wo) < 0.0);
+    tessellation.corners(hit.object, hit.triangle, hit.uv, side)
+}
+
+/// The irradiance at a point of a subtriangle: its corners' cached estimates weighted by
+/// their barycentric weights; `None` while a corner has no estimate.
+fn interpolate(estimates: &Estimates, corners: &[(RadianceKey, radiance::Vertex, f32); 3]) -> Option<Rgb> {
+    let mut sum = Rgb::BLACK;
+    for (k, _, w) in corners {
+        sum += estimates.get(*k)? * *w;
+    }
+    let weights: f32 = corners.iter().map(|x| x.2).sum();
+    Some(if weights > 0.0 { sum / weights } else { Rgb::BLACK })
+}
+
 /// The `particle_gi` technique.
 pub struct ParticleGi {
     config: ParticleGiConfig,
     geometry: Option<Geometry>,
-    field: Option<FluxField>,
+    lighting: Option<Lighting>,
+    /// Estimates per radiance particle, valid while `lighting` and the lists hold.
+    estimates: Estimates,
     passes: u64,
     pending: ParticleStats,
 }
@@ -128,7 +154,14 @@ struct Shaded {
 impl ParticleGi {
     pub fn new(config: ParticleGiConfig, _scene: &Scene) -> Result<ParticleGi, TechniqueError> {
         config.validate()?;
-        Ok(ParticleGi { config, geometry: None, field: None, passes: 0, pending: ParticleStats::default() })
+        Ok(ParticleGi {
+            config,
+            geometry: None,
+            lighting: None,
+            estimates: Estimates::default(),
+            passes: 0,
+            pending: ParticleStats::default(),
+        })
     }
 
     fn bounces(&self, scene: &Scene) -> u32 {
@@ -150,6 +183,7 @@ impl ParticleGi {
             LinkSet::build(ctx.scene, ctx.accel, &particles, &grid, c.gather_links, c.seed ^ GATHER_SALT, diagonal);
         let tessellation = Tessellation::build(ctx.scene, c.subtriangle_edge * spacing);
         self.pending.links_traced += (scatter.len() + gather.len()) as u64;
+        self.estimates = Estimates::new(tessellation.total, lighting::share_count(ctx.scene.lights.len()));
         self.geometry = Some(Geometry {
             particles,
             grid,
@@ -190,6 +224,83 @@ impl ParticleGi {
         g.lists.invalidate(&moved, &boxes, self.config.estimation_radius * g.spacing);
     }
 
+    /// Builds or updates the geometry stage as `delta` requires. Returns whether it changed.
+    fn update_geometry_stage(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> bool {
+        let toggled = delta
+            .materials
+            .iter()
+            .zip(&delta.previous_materials)
+            .any(|(&m, old)| ctx.scene.materials[m].is_specular() != old.is_specular());
+        let moved = !delta.moved.is_empty() || toggled;
+        // Particles and subtriangles follow rigid motion; a change of scale resamples them.
+        let rescaled = self.geometry.as_ref().is_some_and(|g| {
+            (0..ctx.scene.objects.len()).any(|i| particles::stable_scale(ctx.scene, i) != g.scales[i])
+        });
+        if self.geometry.is_none() || toggled || rescaled || (moved && !self.config.incremental) {
+            self.build_geometry(ctx);
+            true
+        } else if moved {
+            self.update_geometry(ctx, delta);
+            true
+        } else {
+            false
+        }
+    }
+
+    /// Runs the lighting stage where `delta` requires it (see `lighting.rs`): everything after
+    /// a geometry change; a re-scatter from the kept direct flux after a material edit; per
+    /// light edit, its share scaled (an intensity edit of a light alone in its share) or
+    /// re-emitted and re-scattered. Cached estimates follow.
+    fn update_lighting(&mut self, ctx: &RenderContext, delta: &SceneDelta, geometry_changed: bool) {
+        let Some(g) = &self.geometry else { return };
+        let inputs = Inputs {
+            scene: ctx.scene,
+            accel: ctx.accel,
+            particles: &g.particles,
+            links: &g.scatter,
+            samples: self.config.emission_samples,
+            bounces: self.bounces(ctx.scene),
+            seed: self.config.seed,
+        };
+        let work = match self.lighting.as_mut() {
+            Some(lighting) if !geometry_changed => {
+                let lights = ctx.scene.lights.len();
+                let mut emit = vec![false; lighting.shares];
+                for change in &delta.lights {
+                    let share = change.light % lighting.shares;
+                    match change.rescale {
+                        Some(f) if !change.moved && lighting::alone_in_share(change.light, lights) => {
+                            lighting.scale(share, f);
+                            self.estimates.scale(share, f);
+                            self.pending.lights_rescaled += 1;
+                        }
+                        _ => emit[share] = true,
+                    }
+                }
+                let scatter = if delta.materials.is_empty() { emit.clone() } else { vec![true; lighting.shares] };
+                if !scatter.contains(&true) {
+                    return;
+                }
+                lighting.redo(&inputs, &emit, &scatter)
+            }
+            _ => {
+                let (lighting, work) = Lighting::compute(&inputs);
+                self.lighting = Some(lighting);
+                work
+            }
+        };
+        self.estimates.invalidate();
+        self.record(work);
+    }
+
+    fn record(&mut self, work: LightingWork) {
+        self.pending.emission_rays += work.emission_rays;
+        self.pending.particles_lit += work.lit;
+        self.pending.scatter_deposits += work.deposits;
+        self.pending.emission_ms += work.emission_ms;
+        self.pending.scattering_ms += work.scattering_ms;
+    }
+
     /// Camera samples `(pixel, sample)` with their direct light (the preliminary trace).
     fn trace(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<Shaded> {
         let t = Instant::now();
@@ -214,37 +325,46 @@ impl ParticleGi {
         shaded
     }
 
-    /// Indirect irradiance at each shaded sample: lists for new radiance particles, gathering
-    /// and estimation for the needed ones, interpolation over each hit's subtriangle.
+    /// Indirect irradiance at each shaded sample, interpolated over its hit's subtriangle from
+    /// the cached estimates; radiance particles without one get their lists, gathering and
+    /// estimation first.
     fn indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded]) -> Vec<Rgb> {
-        let (Some(g), Some(field)) = (self.geometry.as_mut(), self.field.as_ref()) else {
+        let (Some(g), true) = (self.geometry.as_ref(), self.lighting.is_some()) else {
             return vec![Rgb::BLACK; shaded.len()];
         };
         let t = Instant::now();
-        let tessellation = &g.tessellation;
-        let corners: Vec<Option<[(RadianceKey, Vertex, f32); 3]>> = shaded
-            .par_iter()
-            .map(|s| {
-                let hit = s.sample.hit.as_ref()?;
-                let side = u8::from(hit.n.dot(hit.wo) < 0.0);
-                tessellation.corners(hit.object, hit.triangle, hit.uv, side)
-            })
-            .collect();
-        let mut needed: Vec<(RadianceKey, Vertex)> = Vec::with_capacity(3 * corners.len());
-        for c in corners.iter().flatten() {
-            needed.extend(c.iter().map(|(k, v, _)| (*k, *v)));
-        }
-        needed.par_sort_unstable_by_key(|(k, _)| *k);
-        needed.dedup_by_key(|(k, _)| *k);
-        let keys: Vec<RadianceKey> = needed.iter().map(|(k, _)| *k).collect();
+        let corners = |s: &Shaded| sample_corners(&g.tessellation, s);
+        let estimates = &self.estimates;
+        let mut indirect: Vec<Option<Rgb>> =
+            shaded.par_iter().map(|s| corners(s).map_or(Some(Rgb::BLACK), |c| interpolate(estimates, &c))).collect();
+        let pending: Vec<usize> = (0..shaded.len()).filter(|&i| indirect[i].is_none()).collect();
+        let missing =
+            estimates.missing(pending.iter().filter_map(|&i| corners(&shaded[i])).flatten().map(|(k, v, _)| (k, v)));
         self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
-
+        if pending.is_empty() {
+            return indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect();
+        }
+        self.estimate_missing(ctx, &missing);
         let t = Instant::now();
-        let missing: Vec<(RadianceKey, Vertex)> =
-            needed.iter().filter(|(k, _)| !g.lists.lists.contains_key(k)).copied().collect();
+        if let Some(g) = &self.geometry {
+            for i in pending {
+                indirect[i] =
+                    sample_corners(&g.tessellation, &shaded[i]).and_then(|c| interpolate(&self.estimates, &c));
+            }
+        }
+        self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
+        indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect()
+    }
+
+    /// Lists, gathering and estimation for the radiance particles `missing`, whose estimates
+    /// are then cached.
+    fn estimate_missing(&mut self, ctx: &RenderContext, missing: &[(RadianceKey, radiance::Vertex)]) {
+        let (Some(g), Some(lighting)) = (self.geometry.as_mut(), self.lighting.as_ref()) else { return };
+        let t = Instant::now();
         let (radius, cosine) = (self.config.estimation_radius * g.spacing, self.config.estimation_cosine);
         let built: Vec<(RadianceKey, radiance::EstimationList)> = missing
             .par_iter()
+            .filter(|(k, _)| !g.lists.lists.contains_key(k))
             .map(|(k, v)| (*k, EstimationLists::build(ctx.scene, &g.particles, &g.grid, v, radius, cosine)))
             .collect();
         self.pending.lists_built += built.len() as u64;
@@ -252,30 +372,17 @@ impl ParticleGi {
         self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
+        let keys: Vec<RadianceKey> = missing.iter().map(|(k, _)| *k).collect();
         let wanted = gather::particles_to_gather(&g.lists, &keys, g.particles.len());
-        let gathered = gather::gather(&g.gather, field, &wanted, g.particles.len());
+        let gathered = gather::gather(&g.gather, lighting, &wanted, g.particles.len());
         self.pending.area_particles_gathered += wanted.len() as u64;
         self.pending.gathering_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
-        let estimates = gather::estimate(&g.lists, &keys, &gathered, &g.particles.areas);
-        self.pending.radiance_particles_needed += keys.len() as u64;
+        let values = gather::estimate(&g.lists, &keys, &gathered, &g.particles.areas, lighting.shares);
+        self.estimates.store(&keys, &values);
+        self.pending.radiance_particles_estimated += keys.len() as u64;
         self.pending.estimation_ms += t.elapsed().as_secs_f64() * 1e3;
-
-        corners
-            .iter()
-            .map(|c| {
-                let Some(c) = c else { return Rgb::BLACK };
-                let weights: f32 = c.iter().map(|x| x.2).sum();
-                let estimate = |k: &RadianceKey| keys.binary_search(k).map_or(Rgb::BLACK, |i| estimates[i]);
-                let sum = c.iter().fold(Rgb::BLACK, |s, (k, _, w)| s + estimate(k) * *w);
-                if weights > 0.0 {
-                    sum / weights
-                } else {
-                    Rgb::BLACK
-                }
-            })
-            .collect()
     }
 
     /// Each shaded sample's pixel, radiance (emission, direct light, and ρ/π times the indirect
@@ -285,7 +392,7 @@ impl ParticleGi {
         let indirect = self.indirect(ctx, &shaded);
         let t = Instant::now();
         let out = shaded
-            .iter()
+            .par_iter()
             .zip(indirect)
             .map(|(s, e)| {
                 let reflected = match &s.sample.hit {
@@ -331,43 +438,9 @@ impl Technique for ParticleGi {
     fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
         self.pending = ParticleStats::default();
         let t = Instant::now();
-        let toggled = delta
-            .materials
-            .iter()
-            .zip(&delta.previous_materials)
-            .any(|(&m, old)| ctx.scene.materials[m].is_specular() != old.is_specular());
-        let geometry_changed = !delta.moved.is_empty() || toggled;
-        // Particles and subtriangles follow rigid motion; a change of scale resamples them.
-        let rescaled = self.geometry.as_ref().is_some_and(|g| {
-            (0..ctx.scene.objects.len()).any(|i| particles::stable_scale(ctx.scene, i) != g.scales[i])
-        });
-        if self.geometry.is_none() || toggled || rescaled || (geometry_changed && !self.config.incremental) {
-            self.build_geometry(ctx);
-        } else if geometry_changed {
-            self.update_geometry(ctx, delta);
-        }
+        let geometry_changed = self.update_geometry_stage(ctx, delta);
         self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
-        if geometry_changed || !delta.lights.is_empty() || !delta.materials.is_empty() {
-            self.field = None;
-        }
-        if let (None, Some(g)) = (&self.field, &self.geometry) {
-            let t = Instant::now();
-            let (direct, rays) =
-                lighting::emit(ctx.scene, ctx.accel, &g.particles, self.config.emission_samples, self.config.seed);
-            self.pending.emission_ms = t.elapsed().as_secs_f64() * 1e3;
-            let t = Instant::now();
-            let field = lighting::scatter(
-                ctx.scene,
-                &g.particles,
-                &g.scatter,
-                direct,
-                self.bounces(ctx.scene),
-                self.config.seed,
-            );
-            self.pending.emission_rays = rays;
-            self.pending.scattering_ms = t.elapsed().as_secs_f64() * 1e3;
-            self.field = Some(field);
-        }
+        self.update_lighting(ctx, delta, geometry_changed);
         if !delta.is_empty() {
             self.passes = 0;
         }
@@ -416,16 +489,15 @@ impl Technique for ParticleGi {
             stats.radiance_particles = g.tessellation.total;
             stats.links_total = (g.scatter.len() + g.gather.len()) as u64;
             stats.lists_cached = g.lists.lists.len() as u64;
+            stats.estimates_cached = self.estimates.cached();
             let memory = &mut stats.memory;
             memory.set("particles", g.particles.memory_bytes() + g.tessellation.memory_bytes());
             memory.set("scatter_links", g.scatter.memory_bytes());
             memory.set("gather_links", g.gather.memory_bytes());
             memory.set("lists", g.lists.memory_bytes());
             memory.set("grid", g.grid.memory_bytes());
-        }
-        if let Some(f) = &self.field {
-            stats.particles_lit = f.lit;
-            stats.scatter_deposits = f.deposits;
+            memory.set("estimates", self.estimates.memory_bytes());
+            memory.set("field", self.lighting.as_ref().map_or(0, Lighting::memory_bytes));
         }
         stats.bounces = self.bounces(scene);
         let rays = RayCounts {

@@ -7,7 +7,10 @@
 //! of its subtriangle linearly. Each vertex has one particle per side, as area particles do.
 //!
 //! Estimation lists hold the area particles within radius R of a radiance particle whose
-//! normals are within the cosine threshold. Beyond the paper, they are built only for radiance
+//! normals are within the cosine threshold, on the radiance particle's own object: the rule
+//! link ends follow, so light never crosses a contact (a box standing on a lit floor keeps a
+//! dark inside and underside, though the floor's particles lie within R of its bottom and
+//! face the same way as its inner side). Beyond the paper, they are built only for radiance
 //! particles a camera sample actually needs, cached across ticks, and dropped near objects that
 //! move. A list that would be empty falls back to the nearest particle on the same side of the
 //! same object, so every shading point gets an estimate.
@@ -122,6 +125,14 @@ pub struct EstimationList {
     pub particles: Vec<u32>,
 }
 
+/// Whether area particle `k` belongs in the list of a radiance particle of `object` at `q`
+/// with normal `n`.
+fn admitted(particles: &AreaParticles, k: usize, object: u32, q: Vec3, n: Vec3, radius: f32, min_cosine: f32) -> bool {
+    particles.object[k] == object
+        && (particles.position[k] - q).length_squared() <= radius * radius
+        && particles.normal[k].dot(n) >= min_cosine
+}
+
 /// Estimation lists of the radiance particles needed so far.
 #[derive(Clone, Debug, Default)]
 pub struct EstimationLists {
@@ -129,8 +140,8 @@ pub struct EstimationLists {
 }
 
 impl EstimationLists {
-    /// Builds the list of radiance particle `v`: area particles within `radius` whose normal
-    /// has a cosine of at least `min_cosine` with `v`'s, in index order.
+    /// Builds the list of radiance particle `v`: area particles of `v`'s object within
+    /// `radius` whose normal has a cosine of at least `min_cosine` with `v`'s, in index order.
     pub fn build(
         scene: &Scene,
         particles: &AreaParticles,
@@ -143,9 +154,7 @@ impl EstimationLists {
         let mut found = Vec::new();
         grid.within(q, radius, |i| {
             let k = i as usize;
-            if (particles.position[k] - q).length_squared() <= radius * radius
-                && particles.normal[k].dot(n) >= min_cosine
-            {
+            if admitted(particles, k, v.object, q, n, radius, min_cosine) {
                 found.push(i);
             }
         });
@@ -238,7 +247,8 @@ mod tests {
                             let brute: Vec<u32> = (0..particles.len() as u32)
                                 .filter(|&i| {
                                     let k = i as usize;
-                                    (particles.position[k] - q).length_squared() <= radius * radius
+                                    particles.object[k] == object
+                                        && (particles.position[k] - q).length_squared() <= radius * radius
                                         && particles.normal[k].dot(n) >= cosine
                                 })
                                 .collect();
@@ -257,5 +267,37 @@ mod tests {
             }
         }
         assert!(checked > 20, "too few lists checked: {checked}");
+    }
+
+    #[test]
+    fn the_floor_lies_within_the_lists_reach_of_the_box_bottom() {
+        // The negative control of `no_light_crosses_a_contact` (tests/particle_gi.rs): the
+        // box's bottom rests on the floor, so radiance particles on its inner side (facing up)
+        // have floor particles, facing up too, within R. Without the object rule they would
+        // join the list; with it none does.
+        let scene = scene();
+        let particles = AreaParticles::sample(&scene, 6000, None, 3);
+        let spacing = particles.area.sqrt();
+        let grid = ParticleGrid::build(&particles, spacing);
+        let tessellation = Tessellation::build(&scene, 1.5 * spacing);
+        let (radius, cosine) = (2.0 * spacing, 0.9);
+        let (mut bottoms, mut reachable) = (0, 0);
+        for triangle in 0..scene.objects[1].mesh.triangles.len() as u32 {
+            for side in 0..2u8 {
+                let corners = tessellation.corners(1, triangle, Vec2::new(0.3, 0.3), side).expect("corners");
+                for (_, vertex, _) in corners {
+                    let (q, n) = vertex.pose(&scene);
+                    if q.y.abs() > 1e-4 || n.y < 0.99 {
+                        continue;
+                    }
+                    bottoms += 1;
+                    reachable +=
+                        (0..particles.len()).filter(|&k| admitted(&particles, k, 0, q, n, radius, cosine)).count();
+                    let list = EstimationLists::build(&scene, &particles, &grid, &vertex, radius, cosine);
+                    assert!(list.particles.iter().all(|&k| particles.object[k as usize] == 1), "{:?}", list.particles);
+                }
+            }
+        }
+        assert!(bottoms > 0 && reachable > 0, "no contact to test: {bottoms} radiance particles, {reachable} near");
     }
 }
