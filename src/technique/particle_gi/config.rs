@@ -158,6 +158,9 @@ pub struct ParticleStats {
     /// may have changed when updated incrementally), with the box tests that chose them.
     pub links_total: u64,
     pub links_traced: u64,
+    /// Of `links_traced`, the gathering links of particles gathered for the first time (built
+    /// lazily, `links.rs`).
+    pub links_built_lazily: u64,
     pub link_box_tests: u64,
     /// Radiance particles estimated this tick (those a camera sample needed with no cached
     /// estimate), estimation lists built this tick, and lists and estimates cached.

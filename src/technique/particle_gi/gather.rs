@@ -92,7 +92,7 @@ pub fn gather(links: &LinkSet, lighting: &Lighting, needed: &[u32], particles: u
     let values: Vec<Rgb> = needed
         .par_iter()
         .flat_map_iter(|&i| {
-            let ends = &links.ends[i as usize * per..(i as usize + 1) * per];
+            let ends = links.ends_of(i as usize);
             (0..shares).map(move |g| {
                 let sum = ends
                     .iter()

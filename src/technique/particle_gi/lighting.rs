@@ -220,7 +220,7 @@ fn walk(inputs: &Inputs, rho: &[Rgb], i: usize, k: usize, packets: &[Rgb], acc: 
     let links = inputs.links;
     let per = links.per_particle();
     let width = packets.len();
-    let mut at = links.ends[i * per + k];
+    let mut at = links.ends_of(i)[k];
     if at >= NON_DIFFUSE {
         return 0;
     }
@@ -237,7 +237,7 @@ fn walk(inputs: &Inputs, rho: &[Rgb], i: usize, k: usize, packets: &[Rgb], acc: 
     for _ in 0..inputs.bounces {
         throughput = rho[at as usize] * throughput;
         let pick = (rng.next_u32() as usize) % per;
-        let next = links.ends[at as usize * per + pick];
+        let next = links.ends_of(at as usize)[pick];
         if next >= NON_DIFFUSE || throughput.is_black() {
             break;
         }

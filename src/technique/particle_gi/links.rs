@@ -10,6 +10,13 @@
 //! one object cannot change where a link to a static surface ends. Each link also keeps its hit
 //! distance, rounded up to 1/65 534 of the scene diagonal (u16::MAX: none), for the
 //! incremental update's box tests.
+//!
+//! Beyond the paper, a set can be built lazily: a particle's links are traced the first time
+//! they are asked for ([`LinkSet::ensure`]) and stored in the order asked, behind a slot per
+//! particle. The gathering set is built so (only particles in a needed estimation list are
+//! ever gathered, so sides never seen cost nothing); the scattering set, which every walk may
+//! reach, is built whole. The links themselves do not depend on when they are traced, so a
+//! lazy set holds what a full one would for every particle it has.
 use super::particles::{AreaParticles, ParticleGrid};
 use crate::core::frame::ShadingFrame;
 use crate::core::sampling::cosine_hemisphere;
@@ -29,15 +36,21 @@ pub const NON_DIFFUSE: u32 = u32::MAX - 1;
 const NEAREST_RINGS: i32 = 2;
 const NO_DISTANCE: u16 = u16::MAX;
 
-/// One set of links (scattering or gathering) for every particle.
+/// A particle whose links are not built.
+const UNBUILT: u32 = u32::MAX;
+
+/// One set of links (scattering or gathering), for every particle or those asked for so far.
 #[derive(Clone, Debug, Default)]
 pub struct LinkSet {
     /// n_s: the set has n_s² links per particle.
     pub n: u32,
     /// Salt of the direction streams, different per set.
     salt: u64,
-    /// End particle of link k of particle i at `i · n² + k`.
-    pub ends: Vec<u32>,
+    /// Per particle, its slot in `ends` ([`UNBUILT`] if none); per slot, its particle.
+    slot: Vec<u32>,
+    owner: Vec<u32>,
+    /// End particle of link k of the particle in slot s at `s · n² + k`.
+    ends: Vec<u32>,
     distance: Vec<u16>,
     /// Metres per distance step.
     step: f32,
@@ -54,29 +67,52 @@ impl LinkSet {
         (self.n * self.n) as usize
     }
 
+    /// Links built so far.
     pub fn len(&self) -> usize {
         self.ends.len()
     }
 
-    /// Builds every link of every particle. Returns the set and the rays traced.
-    pub fn build(
+    /// A set with no links built yet, for `particles` particles.
+    pub fn empty(n: u32, salt: u64, diagonal: f32, particles: usize) -> LinkSet {
+        let slot = vec![UNBUILT; particles];
+        LinkSet { n, salt, slot, owner: Vec::new(), ends: Vec::new(), distance: Vec::new(), step: diagonal / 65_534.0 }
+    }
+
+    /// The end particles of particle `i`'s links (empty if they are not built).
+    pub fn ends_of(&self, i: usize) -> &[u32] {
+        match self.slot[i] {
+            UNBUILT => &[],
+            s => {
+                let per = self.per_particle();
+                &self.ends[s as usize * per..(s as usize + 1) * per]
+            }
+        }
+    }
+
+    /// Builds the links of the particles of `wanted` that have none, in that order. Returns
+    /// the rays traced.
+    pub fn ensure(
+        &mut self,
         scene: &Scene,
         accel: &SceneAccel,
         particles: &AreaParticles,
         grid: &ParticleGrid,
-        n: u32,
-        salt: u64,
-        diagonal: f32,
-    ) -> LinkSet {
-        let mut set = LinkSet { n, salt, ends: Vec::new(), distance: Vec::new(), step: diagonal / 65_534.0 };
-        let per = set.per_particle();
-        let traced: Vec<Traced> = (0..particles.len() * per)
+        wanted: impl Iterator<Item = u32>,
+    ) -> u64 {
+        let new: Vec<u32> = wanted.filter(|&i| self.slot[i as usize] == UNBUILT).collect();
+        let per = self.per_particle();
+        let this = &*self;
+        let traced: Vec<Traced> = (0..new.len() * per)
             .into_par_iter()
-            .map(|l| set.trace(scene, accel, particles, grid, l / per, l % per))
+            .map(|l| this.trace(scene, accel, particles, grid, new[l / per] as usize, l % per))
             .collect();
-        set.ends = traced.iter().map(|t| t.end).collect();
-        set.distance = traced.iter().map(|t| t.distance).collect();
-        set
+        for &i in &new {
+            self.slot[i as usize] = self.owner.len() as u32;
+            self.owner.push(i);
+        }
+        self.ends.extend(traced.iter().map(|t| t.end));
+        self.distance.extend(traced.iter().map(|t| t.distance));
+        traced.len() as u64
     }
 
     /// Unit world direction of link `k` of particle `i`, whose normal's frame is `frame`.
@@ -143,10 +179,11 @@ impl LinkSet {
         let on_moved = |i: u32| moved[particles.object[i as usize] as usize];
         let this = &*self;
         // Per particle: its frame once, then each link's segment against the boxes.
-        let checked: Vec<(Vec<usize>, u64)> = (0..particles.len())
+        let checked: Vec<(Vec<usize>, u64)> = (0..this.owner.len())
             .into_par_iter()
-            .map(|i| {
-                let links = i * per..(i + 1) * per;
+            .map(|s| {
+                let i = this.owner[s] as usize;
+                let links = s * per..(s + 1) * per;
                 if on_moved(i as u32) {
                     return (links.collect(), 0);
                 }
@@ -182,8 +219,10 @@ impl LinkSet {
             .collect();
         let tests: u64 = checked.iter().map(|c| c.1).sum();
         let stale: Vec<usize> = checked.into_iter().flat_map(|c| c.0).collect();
-        let retraced: Vec<(usize, Traced)> =
-            stale.par_iter().map(|&l| (l, this.trace(scene, accel, particles, grid, l / per, l % per))).collect();
+        let retraced: Vec<(usize, Traced)> = stale
+            .par_iter()
+            .map(|&l| (l, this.trace(scene, accel, particles, grid, this.owner[l / per] as usize, l % per)))
+            .collect();
         for (l, t) in &retraced {
             self.ends[*l] = t.end;
             self.distance[*l] = t.distance;
@@ -192,6 +231,6 @@ impl LinkSet {
     }
 
     pub fn memory_bytes(&self) -> u64 {
-        (self.ends.len() * 6) as u64
+        (self.ends.len() * 6 + (self.slot.len() + self.owner.len()) * 4) as u64
     }
 }

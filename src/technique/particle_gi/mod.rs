@@ -5,8 +5,9 @@
 //!
 //! # Algorithm
 //! 1. Geometry stage (§4.1; when geometry changes): area particles over the diffuse surfaces
-//!    (`particles.rs`, §3.1), n_s × n_s scattering and gathering links traced with Embree
-//!    (`links.rs`), and the implicit radiance particles of the tessellated triangles
+//!    (`particles.rs`, §3.1), n_s × n_s scattering links traced with Embree (`links.rs`);
+//!    gathering links are traced lazily, the first time a particle is gathered, so surfaces
+//!    never seen cost none (beyond the paper, which built all up front); and the implicit radiance particles of the tessellated triangles
 //!    (`radiance.rs`, §3.2). When objects move, only links that may have changed are retraced
 //!    (beyond the paper, which rebuilt all links in seconds): those of particles on a moved
 //!    object (carried by its transform, not resampled), those ending on one, and those whose
@@ -177,12 +178,11 @@ impl ParticleGi {
         let spacing = particles.area.max(f32::MIN_POSITIVE).sqrt();
         let grid = ParticleGrid::build(&particles, GRID_CELL * spacing);
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
-        let scatter =
-            LinkSet::build(ctx.scene, ctx.accel, &particles, &grid, c.scatter_links, c.seed ^ SCATTER_SALT, diagonal);
-        let gather =
-            LinkSet::build(ctx.scene, ctx.accel, &particles, &grid, c.gather_links, c.seed ^ GATHER_SALT, diagonal);
+        let mut scatter = LinkSet::empty(c.scatter_links, c.seed ^ SCATTER_SALT, diagonal, particles.len());
+        self.pending.links_traced += scatter.ensure(ctx.scene, ctx.accel, &particles, &grid, 0..particles.len() as u32);
+        // Gathering links are traced when a particle is first gathered (`estimate_missing`).
+        let gather = LinkSet::empty(c.gather_links, c.seed ^ GATHER_SALT, diagonal, particles.len());
         let tessellation = Tessellation::build(ctx.scene, c.subtriangle_edge * spacing);
-        self.pending.links_traced += (scatter.len() + gather.len()) as u64;
         self.estimates = Estimates::new(tessellation.total, lighting::share_count(ctx.scene.lights.len()));
         self.geometry = Some(Geometry {
             particles,
@@ -369,11 +369,14 @@ impl ParticleGi {
             .collect();
         self.pending.lists_built += built.len() as u64;
         g.lists.lists.extend(built);
+        let keys: Vec<RadianceKey> = missing.iter().map(|(k, _)| *k).collect();
+        let wanted = gather::particles_to_gather(&g.lists, &keys, g.particles.len());
+        let lazily = g.gather.ensure(ctx.scene, ctx.accel, &g.particles, &g.grid, wanted.iter().copied());
+        self.pending.links_traced += lazily;
+        self.pending.links_built_lazily += lazily;
         self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
-        let keys: Vec<RadianceKey> = missing.iter().map(|(k, _)| *k).collect();
-        let wanted = gather::particles_to_gather(&g.lists, &keys, g.particles.len());
         let gathered = gather::gather(&g.gather, lighting, &wanted, g.particles.len());
         self.pending.area_particles_gathered += wanted.len() as u64;
         self.pending.gathering_ms += t.elapsed().as_secs_f64() * 1e3;
