@@ -16,7 +16,7 @@ fn every_estimate_covers_what_the_first_tick_holds() {
         TechniqueConfig::PhotonReuse(PhotonReuseConfig { paths: 40_000, ..PhotonReuseConfig::default() }),
         TechniqueConfig::InstantCache(InstantCacheConfig::default()),
         TechniqueConfig::InstantCache(InstantCacheConfig { audit: true, vpls: 64, ..InstantCacheConfig::default() }),
-        TechniqueConfig::ParticleGi(ParticleGiConfig { particles: 4000, ..ParticleGiConfig::default() }),
+        TechniqueConfig::ParticleGi(ParticleGiConfig { particles: Some(4000), ..ParticleGiConfig::default() }),
         TechniqueConfig::ParticleGi(ParticleGiConfig { particle_area: Some(4000.0), ..ParticleGiConfig::default() }),
     ];
     for scene_name in ["cornell-box.json", "bunnies-1.json"] {

@@ -208,7 +208,13 @@ async fn the_registry_the_spec_and_get_techniques_agree() {
         match p.kind {
             ParameterKind::Integer { min, max } => {
                 let (lo, hi) = (field["minimum"].as_u64().unwrap_or(0), field["maximum"].as_u64().unwrap_or(u64::MAX));
-                let d = default.as_u64().ok_or(format!("{id}.{}: default {default} is not an integer", p.name))?;
+                // A null default (chosen from the scene) must be allowed by the schema.
+                let nullable = field["type"].as_array().is_some_and(|t| t.iter().any(|x| x == "null"));
+                let d = match default.as_u64() {
+                    Some(d) => d,
+                    None if default.is_null() && nullable => min,
+                    None => return Err(format!("{id}.{}: default {default} is not an integer", p.name)),
+                };
                 if min < lo || max > hi || !(min..=max).contains(&d) {
                     return Err(format!("{id}.{}: [{min}, {max}] vs schema [{lo}, {hi}], default {d}", p.name));
                 }

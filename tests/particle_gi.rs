@@ -21,7 +21,7 @@ fn stats(frame: &Frame) -> ParticleStats {
 }
 
 fn config(particles: u32) -> ParticleGiConfig {
-    ParticleGiConfig { particles, gather_links: 8, ..ParticleGiConfig::default() }
+    ParticleGiConfig { particles: Some(particles), gather_links: 8, ..ParticleGiConfig::default() }
 }
 
 #[test]

@@ -72,7 +72,10 @@ impl TechniqueConfig {
                     if on_demand { ":reevaluation=on_demand" } else { "" }
                 )
             }
-            TechniqueConfig::ParticleGi(c) => format!("particle_gi:particles={}", c.particles),
+            TechniqueConfig::ParticleGi(c) => match c.particles {
+                Some(n) => format!("particle_gi:particles={n}"),
+                None => "particle_gi".into(),
+            },
             TechniqueConfig::Bdpt(c) => format!(
                 "bdpt:spp={}{}{}",
                 c.spp,

@@ -28,8 +28,9 @@ pub struct ParticlesArgs {
     pub frames: u32,
     #[arg(long, default_value_t = 30.0)]
     pub fps: f32,
-    #[arg(long, default_value_t = 50_000)]
-    pub particles: u32,
+    /// Area particles (default: the technique's, 0.15 per pixel).
+    #[arg(long)]
+    pub particles: Option<u32>,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Also write the report as JSON.

@@ -32,7 +32,7 @@
 //! # Parameters (defaults)
 //! | field | default | meaning |
 //! |---|---|---|
-//! | `particles` | 50 000 | area particles (two per sampled point, one per side) |
+//! | `particles` | 0.15 per pixel, ≥ 2 000 | area particles (two per sampled point, one per side) |
 //! | `particle_area` | none | ΔA in m² instead of a count |
 //! | `scatter_links` / `gather_links` | 4 / 16 | n_s of each link set |
 //! | `bounces` | from ρ_S | n_b; by default the least with ρ_S^(n_b+2) < `admitted_truncation` (0.01) |
@@ -174,7 +174,7 @@ impl ParticleGi {
     /// Builds particles, links and the tessellation from scratch.
     fn build_geometry(&mut self, ctx: &RenderContext) {
         let c = &self.config;
-        let particles = AreaParticles::sample(ctx.scene, c.particles, c.particle_area, c.seed);
+        let particles = AreaParticles::sample(ctx.scene, c.particle_count(ctx.scene), c.particle_area, c.seed);
         let spacing = particles.area.max(f32::MIN_POSITIVE).sqrt();
         let grid = ParticleGrid::build(&particles, GRID_CELL * spacing);
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
