@@ -84,16 +84,20 @@ fn room() -> Scene {
     slab_room([0.0, 1.0, -2.5], [0.0, 0.6, 1.0], [-0.5, 0.5, 0.5], SLAB_SCALE, [0.0, 1.7, 0.3])
 }
 
-fn move_slab(x: f32) -> Edit {
-    let transform = Trs { translation: [x, 0.5, 0.5], rotation: [0.0, 0.0, 0.0, 1.0], scale: SLAB_SCALE };
+/// The slab at `x`, its width and depth scaled by `k`.
+fn scale_slab(x: f32, k: f32) -> Edit {
+    let scale = [SLAB_SCALE[0] * k, SLAB_SCALE[1], SLAB_SCALE[2] * k];
+    let transform = Trs { translation: [x, 0.5, 0.5], rotation: [0.0, 0.0, 0.0, 1.0], scale };
     Edit::Object { name: "slab".into(), transform }
 }
 
 #[test]
 fn the_incremental_link_update_equals_a_full_rebuild() {
-    // Property: moving the slab and updating links incrementally gives, tick by tick, the
-    // image a full rebuild of every link gives with the same seed, bit for bit, while tracing
-    // a fraction of the links.
+    // Property: moving the slab, and then scaling it, and updating links incrementally gives,
+    // tick by tick, the image a full rebuild of every link gives with the same seed, bit for
+    // bit, while tracing a fraction of the links: a change of scale within the layout's
+    // hysteresis rescales the slab's particles in place (same indices, the areas a rebuild
+    // computes), re-tessellates the slab alone and retraces only links that may touch it.
     let device = Device::new(2).unwrap();
     let pool = thread_pool(2).unwrap();
     pool.install(|| {
@@ -104,9 +108,11 @@ fn the_incremental_link_update_equals_a_full_rebuild() {
         let (mut inc, mut full) = (make(true), make(false));
         let first = stats(&inc.tick().unwrap());
         full.tick().unwrap();
-        for (step, x) in [0.0f32, 0.4, -0.2].into_iter().enumerate() {
-            inc.queue_edits(vec![move_slab(x)]).unwrap();
-            full.queue_edits(vec![move_slab(x)]).unwrap();
+        for (step, (x, k)) in
+            [(0.0f32, 1.0f32), (0.4, 1.0), (-0.2, 1.0), (-0.2, 1.3), (0.1, 0.8)].into_iter().enumerate()
+        {
+            inc.queue_edits(vec![scale_slab(x, k)]).unwrap();
+            full.queue_edits(vec![scale_slab(x, k)]).unwrap();
             let (a, b) = (inc.tick().unwrap(), full.tick().unwrap());
             let (sa, sb) = (stats(&a), stats(&b));
             eprintln!(
@@ -116,6 +122,7 @@ fn the_incremental_link_update_equals_a_full_rebuild() {
             assert_eq!(sb.links_traced, sb.links_total, "the full rebuild traces every link it holds");
             let updated = sa.links_traced - sa.links_built_lazily;
             assert!(updated > 0 && updated < first.links_total / 2, "{sa:?}");
+            assert_eq!(sa.objects_rescaled, u64::from(step >= 3), "{sa:?}");
             assert_finite_non_negative(&a.image);
             assert!(a.image.mean().g > 0.0);
             assert!(

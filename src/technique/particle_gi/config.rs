@@ -191,6 +191,8 @@ pub struct ParticleStats {
     /// scattering deposits (0 when the lighting stage did not run).
     pub particles_lit: u64,
     pub scatter_deposits: u64,
+    /// Objects whose change of scale rescaled their particles in place (the layout held).
+    pub objects_rescaled: u64,
     /// Lights whose intensity edit was applied as a scale of their share (no rays, no walks).
     pub lights_rescaled: u64,
     pub supersampled_pixels: u64,

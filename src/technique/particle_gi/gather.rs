@@ -8,59 +8,73 @@
 //! the shading point multiplies by ρ/π.
 //!
 //! Beyond the paper, estimates are cached per radiance particle and per lighting share
-//! (`lighting.rs`), indexed directly by the radiance key (keys are dense: `id << 1 | side`
-//! below twice the tessellation's count). They hold while the field and the lists do: a
+//! (`lighting.rs`), indexed directly by the radiance key (dense within each object's key
+//! space: `id << 1 | side` below twice the object's count). They hold while the field and the lists do: a
 //! still view or a camera move estimates only the radiance particles it sees for the first
 //! time, and an intensity edit scales its share's estimates like the field.
 use super::lighting::Lighting;
 use super::links::{LinkSet, NON_DIFFUSE};
-use super::radiance::{EstimationLists, RadianceKey};
+use super::radiance::{key_parts, EstimationLists, RadianceKey, Tessellation};
 use crate::core::Rgb;
 use rayon::prelude::*;
 use std::f32::consts::PI;
 
-/// Cached estimates Ē (W/m²) per radiance key and share (key k's share g at `k * shares + g`).
+/// Cached estimates Ē (W/m²) per radiance key and share: per object, key k's share g at
+/// `k * shares + g` of the object's space.
 #[derive(Clone, Debug, Default)]
 pub struct Estimates {
     shares: usize,
-    values: Vec<Rgb>,
-    valid: Vec<bool>,
+    values: Vec<Vec<Rgb>>,
+    valid: Vec<Vec<bool>>,
 }
 
 impl Estimates {
-    /// An empty cache for radiance particles `0..radiance_particles` (both sides each).
-    pub fn new(radiance_particles: u64, shares: usize) -> Estimates {
-        let keys = 2 * radiance_particles as usize;
-        Estimates { shares, values: vec![Rgb::BLACK; keys * shares], valid: vec![false; keys] }
+    /// An empty cache for the radiance particles of `tessellation` (both sides each).
+    pub fn new(tessellation: &Tessellation, shares: usize) -> Estimates {
+        let mut e = Estimates { shares, values: Vec::new(), valid: Vec::new() };
+        for &count in &tessellation.counts {
+            e.values.push(vec![Rgb::BLACK; 2 * count as usize * shares]);
+            e.valid.push(vec![false; 2 * count as usize]);
+        }
+        e
+    }
+
+    /// Empties one object's space, sized for its `count` radiance particles (re-tessellated).
+    pub fn reset_object(&mut self, object: usize, count: u64) {
+        self.values[object] = vec![Rgb::BLACK; 2 * count as usize * self.shares];
+        self.valid[object] = vec![false; 2 * count as usize];
     }
 
     /// Forgets every estimate (the field or the lists changed).
     pub fn invalidate(&mut self) {
-        self.valid.iter_mut().for_each(|v| *v = false);
+        self.valid.iter_mut().flatten().for_each(|v| *v = false);
     }
 
     /// Multiplies share `g` by `factor`, as [`Lighting::scale`] does the field.
     pub fn scale(&mut self, g: usize, factor: Rgb) {
-        for k in (g..self.values.len()).step_by(self.shares) {
-            self.values[k] *= factor;
+        for values in &mut self.values {
+            for k in (g..values.len()).step_by(self.shares) {
+                values[k] *= factor;
+            }
         }
+    }
+
+    fn is_valid(&self, key: RadianceKey) -> Option<bool> {
+        let (object, k) = key_parts(key);
+        self.valid.get(object)?.get(k).copied()
     }
 
     /// The estimate of `key`, summed over the shares, if cached.
     pub fn get(&self, key: RadianceKey) -> Option<Rgb> {
-        let k = key as usize;
-        self.valid
-            .get(k)
-            .copied()
-            .unwrap_or(false)
-            .then(|| self.values[k * self.shares..(k + 1) * self.shares].iter().fold(Rgb::BLACK, |s, &v| s + v))
+        let (object, k) = key_parts(key);
+        self.is_valid(key)?
+            .then(|| self.values[object][k * self.shares..(k + 1) * self.shares].iter().fold(Rgb::BLACK, |s, &v| s + v))
     }
 
     /// The distinct keys of `keys` (each with what goes with it) that have no cached
     /// estimate, in key order.
     pub fn missing<T>(&self, keys: impl Iterator<Item = (RadianceKey, T)>) -> Vec<(RadianceKey, T)> {
-        let mut missing: Vec<(RadianceKey, T)> =
-            keys.filter(|(k, _)| !self.valid.get(*k as usize).copied().unwrap_or(true)).collect();
+        let mut missing: Vec<(RadianceKey, T)> = keys.filter(|(k, _)| self.is_valid(*k) == Some(false)).collect();
         missing.sort_unstable_by_key(|(k, _)| *k);
         missing.dedup_by_key(|(k, _)| *k);
         missing
@@ -68,20 +82,22 @@ impl Estimates {
 
     /// Stores the estimates of `keys` (`values` as [`estimate`] returns them).
     pub fn store(&mut self, keys: &[RadianceKey], values: &[Rgb]) {
+        let shares = self.shares;
         for (n, &key) in keys.iter().enumerate() {
-            let k = key as usize;
-            self.values[k * self.shares..(k + 1) * self.shares]
-                .copy_from_slice(&values[n * self.shares..(n + 1) * self.shares]);
-            self.valid[k] = true;
+            let (object, k) = key_parts(key);
+            self.values[object][k * shares..(k + 1) * shares].copy_from_slice(&values[n * shares..(n + 1) * shares]);
+            self.valid[object][k] = true;
         }
     }
 
     pub fn cached(&self) -> u64 {
-        self.valid.iter().filter(|&&v| v).count() as u64
+        self.valid.iter().flatten().filter(|&&v| v).count() as u64
     }
 
     pub fn memory_bytes(&self) -> u64 {
-        (self.values.len() * std::mem::size_of::<Rgb>() + self.valid.len()) as u64
+        let values: usize = self.values.iter().map(Vec::len).sum();
+        let flags: usize = self.valid.iter().map(Vec::len).sum();
+        (values * std::mem::size_of::<Rgb>() + flags) as u64
     }
 }
 

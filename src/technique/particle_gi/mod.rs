@@ -77,7 +77,7 @@ use gather::Estimates;
 use glam::Vec3;
 use lighting::{Inputs, Lighting, LightingWork};
 use links::LinkSet;
-use particles::{AreaParticles, ParticleGrid};
+use particles::{AreaParticles, Layout, ParticleGrid};
 use radiance::{EstimationLists, RadianceKey, Tessellation};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -128,6 +128,8 @@ fn interpolate(estimates: &Estimates, corners: &[(RadianceKey, radiance::Vertex,
 pub struct ParticleGi {
     config: ParticleGiConfig,
     geometry: Option<Geometry>,
+    /// Points per object, kept across rebuilds while it holds (`particles::Layout`).
+    layout: Option<Layout>,
     lighting: Option<Lighting>,
     /// Estimates per radiance particle, valid while `lighting` and the lists hold.
     estimates: Estimates,
@@ -158,6 +160,7 @@ impl ParticleGi {
         Ok(ParticleGi {
             config,
             geometry: None,
+            layout: None,
             lighting: None,
             estimates: Estimates::default(),
             passes: 0,
@@ -174,7 +177,12 @@ impl ParticleGi {
     /// Builds particles, links and the tessellation from scratch.
     fn build_geometry(&mut self, ctx: &RenderContext) {
         let c = &self.config;
-        let particles = AreaParticles::sample(ctx.scene, c.particle_count(ctx.scene), c.particle_area, c.seed);
+        let layout = match self.layout.take() {
+            Some(l) if l.holds(ctx.scene) => l,
+            _ => Layout::plan(ctx.scene, c.particle_count(ctx.scene), c.particle_area),
+        };
+        let particles = AreaParticles::sample(ctx.scene, &layout, c.seed);
+        self.layout = Some(layout);
         let spacing = particles.area.max(f32::MIN_POSITIVE).sqrt();
         let grid = ParticleGrid::build(&particles, GRID_CELL * spacing);
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
@@ -183,7 +191,7 @@ impl ParticleGi {
         // Gathering links are traced when a particle is first gathered (`estimate_missing`).
         let gather = LinkSet::empty(c.gather_links, c.seed ^ GATHER_SALT, diagonal, particles.len());
         let tessellation = Tessellation::build(ctx.scene, c.subtriangle_edge * spacing);
-        self.estimates = Estimates::new(tessellation.total, lighting::share_count(ctx.scene.lights.len()));
+        self.estimates = Estimates::new(&tessellation, lighting::share_count(ctx.scene.lights.len()));
         self.geometry = Some(Geometry {
             particles,
             grid,
@@ -197,8 +205,10 @@ impl ParticleGi {
         });
     }
 
-    /// Carries the particles of moved objects and retraces the links that may have changed.
-    fn update_geometry(&mut self, ctx: &RenderContext, delta: &SceneDelta) {
+    /// Carries the particles of moved objects, rescales those of `rescaled` ones (their
+    /// subtriangles and cached estimates start over), and retraces the links that may have
+    /// changed.
+    fn update_geometry(&mut self, ctx: &RenderContext, delta: &SceneDelta, rescaled: &[usize]) {
         let Some(g) = self.geometry.as_mut() else { return };
         let mut moved = vec![false; ctx.scene.objects.len()];
         for m in &delta.moved {
@@ -206,6 +216,14 @@ impl ParticleGi {
                 moved[i as usize] = true;
             }
         }
+        for &o in rescaled {
+            g.particles.rescale_object(ctx.scene, o);
+            g.tessellation.build_object(ctx.scene, o, self.config.subtriangle_edge * g.spacing);
+            self.estimates.reset_object(o, g.tessellation.counts[o]);
+            g.scales[o] = particles::stable_scale(ctx.scene, o);
+            moved[o] = true;
+        }
+        self.pending.objects_rescaled += rescaled.len() as u64;
         let carried: Vec<usize> = (0..g.particles.len()).filter(|&i| moved[g.particles.object[i] as usize]).collect();
         if let (Some(&first), Some(&last)) = (carried.first(), carried.last()) {
             // Particles are grouped by object; re-place the span, which covers every carried one.
@@ -232,15 +250,18 @@ impl ParticleGi {
             .zip(&delta.previous_materials)
             .any(|(&m, old)| ctx.scene.materials[m].is_specular() != old.is_specular());
         let moved = !delta.moved.is_empty() || toggled;
-        // Particles and subtriangles follow rigid motion; a change of scale resamples them.
-        let rescaled = self.geometry.as_ref().is_some_and(|g| {
-            (0..ctx.scene.objects.len()).any(|i| particles::stable_scale(ctx.scene, i) != g.scales[i])
+        // Particles and subtriangles follow rigid motion; a change of scale rescales the
+        // object's particles in place while the layout holds, and resamples all otherwise.
+        let rescaled: Vec<usize> = self.geometry.as_ref().map_or(Vec::new(), |g| {
+            (0..ctx.scene.objects.len()).filter(|&i| particles::stable_scale(ctx.scene, i) != g.scales[i]).collect()
         });
-        if self.geometry.is_none() || toggled || rescaled || (moved && !self.config.incremental) {
+        let layout_holds = self.layout.as_ref().is_some_and(|l| l.holds(ctx.scene));
+        let resample = !rescaled.is_empty() && !layout_holds;
+        if self.geometry.is_none() || toggled || resample || (moved && !self.config.incremental) {
             self.build_geometry(ctx);
             true
-        } else if moved {
-            self.update_geometry(ctx, delta);
+        } else if moved || !rescaled.is_empty() {
+            self.update_geometry(ctx, delta, &rescaled);
             true
         } else {
             false

@@ -30,8 +30,9 @@ pub struct AreaParticles {
     pub position: Vec<Vec3>,
     /// Unit normal of the particle's side.
     pub normal: Vec<Vec3>,
-    /// ΔA_i (m²) per particle.
+    /// ΔA_i (m²) per particle, and its share of its object's area (ΔA_i over the area).
     pub areas: Vec<f32>,
+    cell: Vec<f64>,
     /// The mean ΔA (m²): the diffuse area over the points.
     pub area: f32,
 }
@@ -79,6 +80,52 @@ fn planned_points(count: u32, area: Option<f32>, total: f64) -> f64 {
     .max(1.0)
 }
 
+/// How many points each object gets, and the mean ΔA (m²) they were planned for. It outlives
+/// rebuilds while it [`holds`](Layout::holds), so an object's change of scale keeps every
+/// object's count and particle indices (the rescaled object's particles are re-placed and
+/// their areas rescaled, `AreaParticles::rescale_object`), and a full rebuild makes the same
+/// particles an incremental update has.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Layout {
+    /// Points per object (0 for specular objects).
+    pub points: Vec<u64>,
+    pub area: f32,
+}
+
+impl Layout {
+    /// Spreads about `count` particles (or one per `area` m²) over the diffuse objects by area.
+    pub fn plan(scene: &Scene, count: u32, area: Option<f32>) -> Layout {
+        let diffuse = diffuse_objects(scene);
+        let areas: Vec<f64> = diffuse.iter().map(|&i| scaled_area(scene, i)).collect();
+        let total: f64 = areas.iter().sum();
+        let mut points = vec![0; scene.objects.len()];
+        if total <= 0.0 {
+            return Layout { points, area: 0.0 };
+        }
+        for (&object, n) in diffuse.iter().zip(points_per_object(&areas, planned_points(count, area, total))) {
+            points[object] = n;
+        }
+        let placed: u64 = points.iter().sum();
+        Layout { points, area: (total / placed.max(1) as f64) as f32 }
+    }
+
+    /// Whether every diffuse object's count is still within a factor 2 of its area over the
+    /// planned ΔA (hysteresis: scales that come and go within it resample nothing), for the
+    /// same objects and materials.
+    pub fn holds(&self, scene: &Scene) -> bool {
+        let diffuse = diffuse_objects(scene);
+        let planned: Vec<usize> = (0..self.points.len()).filter(|&i| self.points[i] > 0).collect();
+        self.area > 0.0
+            && self.points.len() == scene.objects.len()
+            && diffuse == planned
+            && diffuse.iter().all(|&i| {
+                let ideal = scaled_area(scene, i) / self.area as f64;
+                let n = self.points[i] as f64;
+                n >= (0.5 * ideal).floor() && n <= (2.0 * ideal).ceil().max(1.0)
+            })
+    }
+}
+
 /// Particles [`AreaParticles::sample`] will make on `scene`, without making them.
 pub fn planned_particles(scene: &Scene, count: u32, area: Option<f32>) -> f64 {
     let total: f64 = diffuse_objects(scene).iter().map(|&i| scaled_area(scene, i)).sum();
@@ -90,7 +137,7 @@ pub fn planned_particles(scene: &Scene, count: u32, area: Option<f32>) -> f64 {
 
 /// Bytes per particle as `memory_bytes` counts them, and the temporary bytes per point while
 /// its area is estimated (`AREA_SAMPLES` stratified samples of a triangle and a barycentric).
-pub const BYTES_PER_PARTICLE: u64 = 4 + 4 + 8 + 12 + 12 + 4;
+pub const BYTES_PER_PARTICLE: u64 = 4 + 4 + 8 + 12 + 12 + 4 + 8;
 pub const SAMPLING_BYTES_PER_POINT: u64 = AREA_SAMPLES * 12;
 
 /// Samples per point for estimating its cell's area.
@@ -102,23 +149,25 @@ fn triangle_point(u: Vec2) -> Vec2 {
 }
 
 impl AreaParticles {
-    /// Spreads about `count` particles (or one per `area` m²) over the diffuse objects.
-    pub fn sample(scene: &Scene, count: u32, area: Option<f32>, seed: u64) -> AreaParticles {
-        let diffuse = diffuse_objects(scene);
-        let areas: Vec<f64> = diffuse.iter().map(|&i| scaled_area(scene, i)).collect();
-        let total: f64 = areas.iter().sum();
-        let mut out = AreaParticles::default();
-        if total <= 0.0 {
-            return out;
-        }
-        let points_wanted = planned_points(count, area, total);
-        let points = points_per_object(&areas, points_wanted);
-        let placed: u64 = points.iter().sum();
-        out.area = (total / placed.max(1) as f64) as f32;
-        for ((&object, &n), &area) in diffuse.iter().zip(&points).zip(&areas) {
-            out.sample_object(scene, object, n, area, seed);
+    /// The particles of `layout`, grouped by object in object order.
+    pub fn sample(scene: &Scene, layout: &Layout, seed: u64) -> AreaParticles {
+        let mut out = AreaParticles { area: layout.area, ..AreaParticles::default() };
+        for (object, &n) in layout.points.iter().enumerate().filter(|(_, &n)| n > 0) {
+            out.sample_object(scene, object, n, scaled_area(scene, object), seed);
         }
         out
+    }
+
+    /// After `object`'s scale changed (its layout holding): the same points, re-placed, with
+    /// their areas rescaled to its new area, as a rebuild would make them.
+    pub fn rescale_object(&mut self, scene: &Scene, object: usize) {
+        let Some(first) = self.object.iter().position(|&o| o as usize == object) else { return };
+        let end = first + self.object[first..].iter().take_while(|&&o| o as usize == object).count();
+        let world_area = scaled_area(scene, object);
+        for i in first..end {
+            self.areas[i] = (self.cell[i] * world_area) as f32;
+        }
+        self.place(scene, first..end);
     }
 
     /// `n` stratified points on `object`, picked by area along its triangles, with their cell
@@ -146,12 +195,13 @@ impl AreaParticles {
         }
         let total: u64 = caught.iter().sum();
         for (&(triangle, b), &c) in points.iter().zip(&caught) {
-            let area = (c as f64 / total as f64 * world_area) as f32;
+            let cell = c as f64 / total as f64;
             for _side in 0..2 {
                 self.object.push(object as u32);
                 self.triangle.push(triangle);
                 self.barycentric.push(b);
-                self.areas.push(area);
+                self.areas.push((cell * world_area) as f32);
+                self.cell.push(cell);
             }
         }
         let first = self.position.len();

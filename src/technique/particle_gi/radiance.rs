@@ -20,8 +20,18 @@ use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
 
-/// A radiance particle on one side: `id << 1 | side`.
+/// A radiance particle on one side: `object << OBJECT_SHIFT | id << 1 | side`, its id counted
+/// within its object, so each object has its own key space and re-tessellating one object
+/// leaves every other key alone.
 pub type RadianceKey = u64;
+
+/// Where a key's object starts: ids below 2³⁹ per object.
+pub const OBJECT_SHIFT: u32 = 40;
+
+/// A key's object and its place within the object's space (`id << 1 | side`).
+pub fn key_parts(key: RadianceKey) -> (usize, usize) {
+    ((key >> OBJECT_SHIFT) as usize, (key & ((1 << OBJECT_SHIFT) - 1)) as usize)
+}
 
 /// Where a radiance particle sits: its triangle and its vertex of the triangle's m-grid.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -47,9 +57,12 @@ impl Vertex {
 /// The implicit radiance particles of every diffuse triangle.
 #[derive(Clone, Debug, Default)]
 pub struct Tessellation {
-    /// Per object and triangle: the first id and m (0 for objects without particles).
+    /// Per object and triangle: the first id (within the object) and m (none for objects
+    /// without particles).
     first: Vec<Vec<u32>>,
     level: Vec<Vec<u16>>,
+    /// Radiance particles per object (one side), and their sum.
+    pub counts: Vec<u64>,
     pub total: u64,
 }
 
@@ -62,25 +75,31 @@ fn local_index(i: u32, j: u32, m: u32) -> u32 {
 impl Tessellation {
     /// Splits every triangle of the diffuse objects so subtriangle edges stay below `max_edge`.
     pub fn build(scene: &Scene, max_edge: f32) -> Tessellation {
-        let mut t = Tessellation::default();
-        let mut next = 0u64;
-        for o in &scene.objects {
-            let diffuse = !scene.materials[o.material as usize].is_specular();
-            let (mut first, mut level) = (Vec::new(), Vec::new());
-            for &[a, b, c] in o.mesh.triangles.iter().filter(|_| diffuse) {
-                let (a, b, c) =
-                    (o.world_positions[a as usize], o.world_positions[b as usize], o.world_positions[c as usize]);
-                let edge = (b - a).length().max((c - b).length()).max((a - c).length());
-                let m = ((edge / max_edge).ceil() as u32).clamp(1, u16::MAX as u32 / 2);
-                first.push(next.min(u32::MAX as u64) as u32);
-                level.push(m as u16);
-                next += ((m + 1) * (m + 2) / 2) as u64;
-            }
-            t.first.push(first);
-            t.level.push(level);
+        let n = scene.objects.len();
+        let mut t =
+            Tessellation { first: vec![Vec::new(); n], level: vec![Vec::new(); n], counts: vec![0; n], total: 0 };
+        for object in 0..n {
+            t.build_object(scene, object, max_edge);
         }
-        t.total = next;
         t
+    }
+
+    /// Re-splits one object's triangles (after a change of scale).
+    pub fn build_object(&mut self, scene: &Scene, object: usize, max_edge: f32) {
+        let o = &scene.objects[object];
+        let diffuse = !scene.materials[o.material as usize].is_specular();
+        let (mut first, mut level, mut next) = (Vec::new(), Vec::new(), 0u64);
+        for &[a, b, c] in o.mesh.triangles.iter().filter(|_| diffuse) {
+            let (a, b, c) =
+                (o.world_positions[a as usize], o.world_positions[b as usize], o.world_positions[c as usize]);
+            let edge = (b - a).length().max((c - b).length()).max((a - c).length());
+            let m = ((edge / max_edge).ceil() as u32).clamp(1, u16::MAX as u32 / 2);
+            first.push(next.min(u32::MAX as u64) as u32);
+            level.push(m as u16);
+            next += ((m + 1) * (m + 2) / 2) as u64;
+        }
+        self.total = self.total - self.counts[object] + next;
+        (self.first[object], self.level[object], self.counts[object]) = (first, level, next);
     }
 
     /// The three radiance particles around barycentrics `uv` of a triangle, on `side`, with
@@ -98,7 +117,7 @@ impl Tessellation {
         let vertex = |i: u32, j: u32| {
             let id = first as u64 + local_index(i, j, m) as u64;
             let v = Vertex { object, triangle, i: i as u16, j: j as u16, m: m as u16, side };
-            (id << 1 | side as u64, v)
+            ((object as u64) << OBJECT_SHIFT | id << 1 | side as u64, v)
         };
         let with = |(k, v): (RadianceKey, Vertex), w: f32| (k, v, w.max(0.0));
         Some(if fu + fv <= 1.0 || i + j + 2 > m {
@@ -189,6 +208,7 @@ impl EstimationLists {
 
 #[cfg(test)]
 mod tests {
+    use super::super::particles::Layout;
     use super::*;
 
     #[test]
@@ -230,7 +250,7 @@ mod tests {
     #[test]
     fn estimation_lists_hold_exactly_the_near_particles_with_similar_normals() {
         let scene = scene();
-        let particles = AreaParticles::sample(&scene, 6000, None, 3);
+        let particles = AreaParticles::sample(&scene, &Layout::plan(&scene, 6000, None), 3);
         let spacing = particles.area.sqrt();
         let grid = ParticleGrid::build(&particles, spacing);
         let tessellation = Tessellation::build(&scene, 1.5 * spacing);
@@ -276,7 +296,7 @@ mod tests {
         // have floor particles, facing up too, within R. Without the object rule they would
         // join the list; with it none does.
         let scene = scene();
-        let particles = AreaParticles::sample(&scene, 6000, None, 3);
+        let particles = AreaParticles::sample(&scene, &Layout::plan(&scene, 6000, None), 3);
         let spacing = particles.area.sqrt();
         let grid = ParticleGrid::build(&particles, spacing);
         let tessellation = Tessellation::build(&scene, 1.5 * spacing);
