@@ -282,3 +282,34 @@ fn no_light_crosses_a_contact() {
     assert!(st.radiance_particles_estimated > 0 && st.particles_lit > 0, "{st:?}");
     assert!(frame.image.pixels.iter().all(|p| p.is_black()), "light leaked into the crate");
 }
+
+#[test]
+fn a_still_scene_does_no_lighting_work_and_refines() {
+    // Properties: after the first tick of a still scene, no tick emits, scatters or retraces
+    // a link (the field and the links are kept; only gathering links of particles gathered for
+    // the first time are built), fewer radiance particles need estimating as the cache warms,
+    // and the image refines toward the `path` reference: its jittered camera samples
+    // accumulate, so the relMSE after 16 still ticks is below the first tick's.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    let mut scene = load("cornell-box.json");
+    scene.set_resolution(24, 24);
+    let reference = render(scene.clone(), TechniqueConfig::Path(path(512)), 3, 1, 2).image;
+    pool.install(|| {
+        let c = TechniqueConfig::ParticleGi(config(6_000));
+        let mut s = Session::new(scene, &c, 5, &device).expect("session");
+        let first = s.tick().unwrap();
+        let (mut estimated, mut last) = (Vec::new(), first.clone());
+        for _ in 1..16 {
+            last = s.tick().unwrap();
+            let st = stats(&last);
+            let updated = st.links_traced - st.links_built_lazily;
+            assert_eq!((st.emission_rays, st.scatter_deposits, updated), (0, 0, 0), "{st:?}");
+            estimated.push(st.radiance_particles_estimated);
+        }
+        let (e1, e16) = (rel_mse(&first.image, &reference), rel_mse(&last.image, &reference));
+        eprintln!("estimated per still tick: {estimated:?}; relMSE tick 1 {e1:.4}, tick 16 {e16:.4}");
+        assert!(estimated[estimated.len() - 1] < estimated[0], "{estimated:?}");
+        assert!(e16 < e1, "the still image did not refine: {e1} -> {e16}");
+    });
+}
