@@ -3,8 +3,9 @@
 //! update against a full rebuild.
 //!
 //! Tick 0 builds everything (the geometry stage). Tick 1 relights: the first light moves by 2%
-//! of the scene's diagonal if it is dynamic, or is dimmed by 20% if static; either way the
-//! lighting stage reruns and nothing geometric does. The Whitted time is that tick's camera
+//! of the scene's diagonal if it is dynamic (its share of the lighting stage reruns), or is
+//! dimmed by 20% if static (a scale of its share: no rays, no walks); nothing geometric
+//! reruns either way. The Whitted time is that tick's camera
 //! rays, specular chains and shadow rays (the same work a Whitted ray tracer does, measured in
 //! the same run). With `--anim`, the animation plays twice, with `incremental` on and off, and
 //! the links traced and geometry-stage times per frame are compared.

@@ -6,8 +6,9 @@
 //! time and a retrace gives what a full rebuild would. A hit on a light, a miss, or a hit with
 //! no particle nearby ends nowhere ([`NOWHERE`]); a hit on a specular surface ends at
 //! [`NON_DIFFUSE`] (this method carries diffuse transport only). The end particle is the
-//! nearest one on the side of the hit object that the hit triangle turns towards the ray, never one on another object, so moving
-//! one object cannot change where a link to a static surface ends. Each link also keeps its hit
+//! nearest one on the side of the hit object that the hit triangle turns towards the ray,
+//! never one on another object, so moving one object cannot change where a link to a static
+//! surface ends. Each link also keeps its hit
 //! distance, rounded up to 1/65 534 of the scene diagonal (u16::MAX: none), for the
 //! incremental update's box tests.
 //!

@@ -7,12 +7,14 @@
 //! 1. Geometry stage (§4.1; when geometry changes): area particles over the diffuse surfaces
 //!    (`particles.rs`, §3.1), n_s × n_s scattering links traced with Embree (`links.rs`);
 //!    gathering links are traced lazily, the first time a particle is gathered, so surfaces
-//!    never seen cost none (beyond the paper, which built all up front); and the implicit radiance particles of the tessellated triangles
-//!    (`radiance.rs`, §3.2). When objects move, only links that may have changed are retraced
+//!    never seen cost none (beyond the paper, which built all up front); and the implicit
+//!    radiance particles of the tessellated triangles (`radiance.rs`, §3.2). When objects move, only links that may have changed are retraced
 //!    (beyond the paper, which rebuilt all links in seconds): those of particles on a moved
 //!    object (carried by its transform, not resampled), those ending on one, and those whose
 //!    segment touches a moved surface's old or new bounds. Estimation lists near moved objects
-//!    are dropped.
+//!    are dropped. A change of scale keeps every object's point count while each stays within
+//!    a factor 2 of its area's share (`particles::Layout`): the object's particles keep their
+//!    indices and get new areas, and it alone is re-tessellated; otherwise all is resampled.
 //! 2. Lighting stage (§4.2; when lights, materials or geometry change, `lighting.rs`):
 //!    emission to the particles, the first bounce through all scattering links, n_b more
 //!    bounces through one random link each, and L = ρ/π · φ/ΔA. Beyond the paper, the field

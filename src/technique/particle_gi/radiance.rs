@@ -247,14 +247,28 @@ mod tests {
         Scene::from_desc(desc, &dir, &dir).expect("scene")
     }
 
-    #[test]
-    fn estimation_lists_hold_exactly_the_near_particles_with_similar_normals() {
+    /// The scene's particles (6 000), grid and tessellation, with the default radius and cosine.
+    struct Fixture {
+        scene: Scene,
+        particles: AreaParticles,
+        grid: ParticleGrid,
+        tessellation: Tessellation,
+        radius: f32,
+        cosine: f32,
+    }
+
+    fn fixture() -> Fixture {
         let scene = scene();
         let particles = AreaParticles::sample(&scene, &Layout::plan(&scene, 6000, None), 3);
         let spacing = particles.area.sqrt();
         let grid = ParticleGrid::build(&particles, spacing);
         let tessellation = Tessellation::build(&scene, 1.5 * spacing);
-        let (radius, cosine) = (2.0 * spacing, 0.9);
+        Fixture { scene, particles, grid, tessellation, radius: 2.0 * spacing, cosine: 0.9 }
+    }
+
+    #[test]
+    fn estimation_lists_hold_exactly_the_near_particles_with_similar_normals() {
+        let Fixture { scene, particles, grid, tessellation, radius, cosine } = fixture();
         let mut checked = 0;
         for object in 0..2u32 {
             for triangle in 0..2u32 {
@@ -295,12 +309,7 @@ mod tests {
         // box's bottom rests on the floor, so radiance particles on its inner side (facing up)
         // have floor particles, facing up too, within R. Without the object rule they would
         // join the list; with it none does.
-        let scene = scene();
-        let particles = AreaParticles::sample(&scene, &Layout::plan(&scene, 6000, None), 3);
-        let spacing = particles.area.sqrt();
-        let grid = ParticleGrid::build(&particles, spacing);
-        let tessellation = Tessellation::build(&scene, 1.5 * spacing);
-        let (radius, cosine) = (2.0 * spacing, 0.9);
+        let Fixture { scene, particles, grid, tessellation, radius, cosine } = fixture();
         let (mut bottoms, mut reachable) = (0, 0);
         for triangle in 0..scene.objects[1].mesh.triangles.len() as u32 {
             for side in 0..2u8 {
