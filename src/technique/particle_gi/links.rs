@@ -164,7 +164,8 @@ impl LinkSet {
     /// Retraces the links that may have changed after surfaces moved: those of particles on a
     /// moved object (`moved[object]`), those ending on one, and those whose segment touches a
     /// moved surface's old or new bounds (`boxes`, also as `tree`). A particle with every box
-    /// behind its tangent plane is skipped whole: its links leave into its hemisphere. Returns
+    /// behind its tangent plane is skipped whole: its links leave into its hemisphere; a link
+    /// whose (rounded-up) length falls short of the nearest box is skipped untested. Returns
     /// the links retraced and box tests.
     pub fn update(
         &mut self,
@@ -198,6 +199,9 @@ impl LinkSet {
                     return (Vec::new(), boxes.len() as u64);
                 }
                 let frame = ShadingFrame::from_normal(n);
+                // A link shorter than the way to the nearest box cannot touch one.
+                let reach = boxes.iter().map(|b| (b.min - origin).max(origin - b.max).max(Vec3::ZERO).length());
+                let reach = reach.fold(f32::INFINITY, f32::min);
                 let (mut stale, mut tests) = (Vec::new(), 0u64);
                 for l in links {
                     let end = this.ends[l];
@@ -209,6 +213,9 @@ impl LinkSet {
                         NO_DISTANCE => f32::INFINITY,
                         d => d as f32 * this.step,
                     };
+                    if t < reach {
+                        continue;
+                    }
                     let (touches, count) = tree.hits(origin, this.direction(&frame, i, l % per), t);
                     tests += count;
                     if touches {
