@@ -53,7 +53,7 @@ impl Estimates {
     /// Multiplies share `g` by `factor`, as [`Lighting::scale`] does the field.
     pub fn scale(&mut self, g: usize, factor: Rgb) {
         for values in &mut self.values {
-            for k in (g..values.len()).step_by(self.shares) {
+            for k in (g..values.len()).step_by(self.shares.max(1)) {
                 values[k] *= factor;
             }
         }

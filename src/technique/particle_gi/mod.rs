@@ -257,8 +257,8 @@ impl ParticleGi {
         let rescaled: Vec<usize> = self.geometry.as_ref().map_or(Vec::new(), |g| {
             (0..ctx.scene.objects.len()).filter(|&i| particles::stable_scale(ctx.scene, i) != g.scales[i]).collect()
         });
-        let layout_holds = self.layout.as_ref().is_some_and(|l| l.holds(ctx.scene));
-        let resample = !rescaled.is_empty() && !layout_holds;
+        // Checked only on a change of scale: it walks every object's triangles.
+        let resample = !rescaled.is_empty() && !self.layout.as_ref().is_some_and(|l| l.holds(ctx.scene));
         if self.geometry.is_none() || toggled || resample || (moved && !self.config.incremental) {
             self.build_geometry(ctx);
             true
