@@ -88,25 +88,53 @@ pub struct Cache {
     scale: f32,
     /// a, in units of `scale`.
     radius: f32,
+    /// Since the last [`Cache::take_renumbering`]: each record index then → its index now, or
+    /// [`GONE`]; `None` while no record went.
+    renumbering: Option<Vec<u32>>,
 }
+
+/// A record that [`Cache::retain`] removed, in a renumbering.
+pub const GONE: u32 = u32::MAX;
 
 impl Cache {
     /// An empty cache over the scene bounds `(lo, hi)` with caching radius `radius` (relative).
     pub fn new(lo: Vec3, hi: Vec3, radius: f32) -> Cache {
         let scale = (hi - lo).length().max(f32::MIN_POSITIVE);
         let octree = Octree::new((lo + hi) * 0.5, (hi - lo).max_element() * 0.5, radius * scale / 2.0);
-        Cache { records: Vec::new(), octree, scale, radius }
+        Cache { records: Vec::new(), octree, scale, radius, renumbering: None }
     }
 
     pub fn clear(&mut self) {
         self.records.clear();
         self.octree.clear();
+        self.renumbering = None;
     }
 
-    /// Keeps the records for which `keep` holds (indices change) and returns how many went.
-    pub fn retain(&mut self, keep: impl FnMut(&Record) -> bool) -> u64 {
+    /// Keeps the records for which `keep` holds and returns how many went. Kept records keep
+    /// their order; their indices close up, as [`Cache::take_renumbering`] then tells.
+    pub fn retain(&mut self, mut keep: impl FnMut(&Record) -> bool) -> u64 {
         let before = self.records.len();
-        self.records.retain(keep);
+        let kept: Vec<bool> = self.records.iter().map(&mut keep).collect();
+        if kept.iter().any(|&k| !k) {
+            let mut next = 0u32;
+            let step: Vec<u32> = kept
+                .iter()
+                .map(|&k| {
+                    next += u32::from(k);
+                    if k {
+                        next - 1
+                    } else {
+                        GONE
+                    }
+                })
+                .collect();
+            let mut flags = kept.iter();
+            self.records.retain(|_| flags.next().copied().unwrap_or(true));
+            self.renumbering = Some(match self.renumbering.take() {
+                Some(earlier) => earlier.into_iter().map(|i| if i == GONE { GONE } else { step[i as usize] }).collect(),
+                None => step,
+            });
+        }
         if self.records.len() < before {
             self.octree.clear();
             for (i, r) in self.records.iter().enumerate() {
@@ -116,6 +144,12 @@ impl Cache {
         (before - self.records.len()) as u64
     }
 
+    /// How record indices changed since the last call: index then → index now, or [`GONE`];
+    /// `None` if no record went (records made since then take the indices after the old ones).
+    pub fn take_renumbering(&mut self) -> Option<Vec<u32>> {
+        self.renumbering.take()
+    }
+
     pub fn insert(&mut self, record: Record) -> u32 {
         let index = self.records.len() as u32;
         self.octree.insert(Key { index, position: record.position, normal: record.normal }, record.position);
@@ -123,7 +157,6 @@ impl Cache {
         index
     }
 
-    /// Eq. 5's weight of `record` at `p` with unit normal `n`.
     /// Calls `f(index, w)` for every record with eq. 5's weight w > 1/a at `p` (unit normal
     /// `n`) until `f` returns false. A record farther than a cannot qualify, so the square root
     /// waits for the distance test. Returns false if `f` stopped it.
@@ -137,6 +170,11 @@ impl Cache {
             let inverse = d2.sqrt() / self.scale + (1.0 - n.dot(key.normal)).max(0.0).sqrt();
             inverse >= self.radius || f(key.index, 1.0 / inverse.max(1e-12))
         })
+    }
+
+    /// How far a record reaches: a, in scene units.
+    pub fn reach(&self) -> f32 {
+        self.radius * self.scale
     }
 
     /// Calls `f(index, w)` for every record with w > 1/a at `p`.

@@ -69,6 +69,10 @@ impl Default for InstantCacheConfig {
     }
 }
 
+/// Records a sample's interpolation holds, for the memory estimate (about 10 on the bundled
+/// scenes at the default caching radius).
+const WEIGHTS_PER_SAMPLE: u64 = 16;
+
 /// Most VPLs a tick may shoot.
 pub const MAX_VPLS: u32 = 65_536;
 
@@ -80,12 +84,11 @@ impl InstantCacheConfig {
         let vpls = u64::from(self.vpls);
         let samples = pixels.saturating_mul(u64::from(self.spp));
         let records = samples * if self.audit { 2 } else { 1 };
-        // `temporal` keeps each sample's last hit and irradiance for its still check.
-        let last = if self.mode == CacheMode::Temporal { samples } else { 0 };
-        product_sum(
-            "vpls",
-            &[(vpls, size::<Vpl>()), (records, size::<Record>() + 4 * vpls), (last, super::LAST_BYTES_PER_SAMPLE)],
-        )
+        // `temporal` keeps each sample's hit, irradiance and record weights (`pixels.rs`),
+        // estimated at `WEIGHTS_PER_SAMPLE` each.
+        let kept = if self.mode == CacheMode::Temporal { samples } else { 0 };
+        let per_sample = super::pixels::STATE_BYTES + WEIGHTS_PER_SAMPLE * super::pixels::WEIGHT_BYTES;
+        product_sum("vpls", &[(vpls, size::<Vpl>()), (records, size::<Record>() + 4 * vpls), (kept, per_sample)])
     }
 
     pub fn validate(&self) -> Result<(), TechniqueError> {
@@ -136,11 +139,15 @@ pub struct InstantCacheStats {
     pub records: u64,
     pub records_created: u64,
     pub records_reused: u64,
-    /// Camera samples that looked up and interpolated the cache this tick.
+    /// Camera samples whose irradiance was interpolated (eq. 4) this tick.
     pub samples_interpolated: u64,
     /// `temporal`: camera samples that kept their last tick's irradiance (a still tick: same
-    /// hit, no change in the scene), without a lookup.
+    /// hit and records, no change in the scene), without a lookup or a sum.
     pub samples_reused: u64,
+    /// Camera samples that looked the cache up (the rest kept their records: `pixels.rs`).
+    pub samples_looked_up: u64,
+    /// Octree queries: samples' lookups and the coverage tests of samples with no record.
+    pub cache_lookups: u64,
     /// `temporal`: records re-evaluated, and by case those with a ray retraced or a
     /// contribution changed (`vpl`: cases 1–2, a VPL moved, appeared or changed intensity).
     pub records_refreshed: u64,
@@ -181,6 +188,10 @@ pub struct InstantCacheStats {
     pub audit_records: u64,
     pub audit_mismatched: u64,
     pub audit_off_surface: u64,
+    /// With `audit`: samples whose kept records differ from a fresh lookup, and samples whose
+    /// hit or records changed since last tick (those that had to look up).
+    pub audit_samples_mismatched: u64,
+    pub audit_samples_needed: u64,
     /// A hash of the audited records (positions, normals, contributions): equal caches, equal
     /// digests.
     pub audit_digest: u64,

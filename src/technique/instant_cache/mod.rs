@@ -14,10 +14,10 @@
 //! 3. Indirect diffuse light, by mode:
 //!    - `igi` (`igi.rs`): each pixel gathers its n×n-interleaved subset of the VPLs with
 //!      visibility rays, then a discontinuity buffer averages the n×n neighbourhood.
-//!    - `static` (`cache.rs`, `octree.rs`): an irradiance cache cleared every tick. In pixel
-//!      order, a record is made wherever no record has w_k(x) > 1/a (eq. 5); records are
-//!      computed in parallel, each with one visibility ray per VPL and G′ (eqs. 2–3), and every
-//!      pixel interpolates them (eq. 4). Deciding where records go in pixel order keeps the
+//!    - `static` (`cache.rs`, `octree.rs`, `pixels.rs`): an irradiance cache cleared every
+//!      tick. In pixel order, a record is made wherever no record has w_k(x) > 1/a (eq. 5);
+//!      records are computed in parallel, each with one visibility ray per VPL and G′
+//!      (eqs. 2–3), and every pixel interpolates them (eq. 4). Deciding where records go in pixel order keeps the
 //!      image independent of the thread count.
 //!    - `temporal` (`temporal.rs`, §3.2, Algorithm 1): the same cache kept across ticks. At
 //!      the start of a tick, records unused for `max_age` ticks go; if VPLs changed or
@@ -26,11 +26,12 @@
 //!      pixel first interpolates them (`on_demand`). New areas get records on demand as in
 //!      `static`. The result is exact: every record equals a fresh computation. Camera
 //!      samples use the same sub-pixel points every tick (the k-th of a tick's `spp`), so a
-//!      still view makes no records after its first tick; direct light still varies. On a
-//!      still tick (no scene change at all) a sample that finds the hit it found last tick
-//!      keeps last tick's irradiance without a lookup; if any sample's hit differs (a glass
-//!      chain that chose another lobe), the pass looks every sample up as usual. VPLs are
-//!      shot again only when geometry, a light or a material changed.
+//!      still view makes no records after its first tick; direct light still varies. Each
+//!      sample keeps its records and weights (`pixels.rs`): it looks the cache up again only
+//!      if its hit changed, one of its records went, or a record made this tick may reach
+//!      it; otherwise it only re-sums, and on a still tick (no scene change at all) it keeps
+//!      last tick's irradiance. VPLs are shot again only when geometry, a light or a
+//!      material changed.
 //! 4. Radiance = emission seen along the chain + direct + ρ/π · indirect irradiance.
 //!
 //! # Parameters (defaults)
@@ -71,6 +72,7 @@ mod config;
 pub use config::DESCRIPTION;
 mod igi;
 mod octree;
+mod pixels;
 mod rgbe;
 mod temporal;
 mod vpl;
@@ -83,11 +85,11 @@ use crate::core::{Rgb, Rng};
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
 use crate::scene::Scene;
-use cache::{Cache, Record};
+use cache::Cache;
 use glam::Vec3;
+use pixels::SampleState;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 use temporal::{Refresh, TickChanges};
 use vpl::Vpl;
@@ -114,27 +116,10 @@ pub struct InstantCache {
     /// The photon paths the VPLs come from; `None` until they are first shot.
     vpl_paths: Option<u64>,
     /// `temporal`: nothing this tick can change a cached irradiance (no scene change, so the
-    /// same VPLs and records), so a sample that finds its last tick's hit keeps its result.
+    /// same VPLs and records), so a sample that keeps its records keeps its result.
     still: bool,
-    /// `temporal`: each pass's samples and interpolated irradiance, from the last tick.
-    last: Vec<LastPass>,
-}
-
-/// What one pass of a tick interpolated, kept for the next tick's still check.
-#[derive(Default)]
-struct LastPass {
-    /// Each sample's first diffuse hit: position, facing normal, object.
-    hits: Vec<Option<(Vec3, Vec3, u32)>>,
-    indirect: Vec<Option<Rgb>>,
-}
-
-/// What [`LastPass`] keeps per camera sample.
-pub(crate) const LAST_BYTES_PER_SAMPLE: u64 =
-    (std::mem::size_of::<Option<(Vec3, Vec3, u32)>>() + std::mem::size_of::<Option<Rgb>>()) as u64;
-
-/// A sample's hit as [`LastPass`] keeps it.
-fn hit_key(s: &Shaded) -> Option<(Vec3, Vec3, u32)> {
-    s.sample.hit.as_ref().map(|h| (h.p, h.facing(), h.object))
+    /// `temporal`: each pass's samples and their interpolation (`pixels.rs`), from the last tick.
+    samples: Vec<Vec<SampleState>>,
 }
 
 /// A pixel's camera sample with its direct light.
@@ -157,7 +142,7 @@ impl InstantCache {
             pending: InstantCacheStats::default(),
             vpl_paths: None,
             still: false,
-            last: Vec::new(),
+            samples: Vec::new(),
         })
     }
 
@@ -183,34 +168,6 @@ impl InstantCache {
         self.pending.vpl_cap_reached = shot.capped;
         self.pending.vpl_rays = shot.rays;
         std::mem::replace(&mut self.vpls, shot.vpls)
-    }
-
-    /// `temporal` on a still tick: the last tick's irradiance for pass `k`, when every sample
-    /// found the same hit as then (no record can have changed, and none is needed). The records
-    /// those samples used are marked used, as interpolating would have.
-    fn still_indirect(&mut self, ctx: &RenderContext, k: usize, shaded: &[Shaded]) -> Option<Vec<Option<Rgb>>> {
-        let last = self.last.get(k).filter(|_| self.still)?;
-        let same = last.hits.len() == shaded.len() && shaded.par_iter().zip(&last.hits).all(|(s, h)| hit_key(s) == *h);
-        if !same {
-            return None;
-        }
-        if let Some(cache) = self.cache.as_mut() {
-            let tick = ctx.tick;
-            cache.records.iter_mut().filter(|r| r.last_used + 1 >= tick).for_each(|r| r.last_used = tick);
-            self.pending.records = cache.records.len() as u64;
-            self.pending.memory.set("cache", cache.memory_bytes());
-        }
-        self.pending.samples_reused += shaded.len() as u64;
-        Some(last.indirect.clone())
-    }
-
-    /// Keeps pass `k`'s samples and irradiance for the next tick's still check (`temporal`).
-    fn remember(&mut self, k: usize, shaded: &[Shaded], indirect: &[Option<Rgb>]) {
-        if self.config.mode != CacheMode::Temporal {
-            return;
-        }
-        self.last.resize_with(self.config.spp as usize, LastPass::default);
-        self.last[k] = LastPass { hits: shaded.iter().map(hit_key).collect(), indirect: indirect.to_vec() };
     }
 
     /// `temporal`, at the start of a tick: ages the cache and applies what changed since the
@@ -251,83 +208,47 @@ impl InstantCache {
         Ok(())
     }
 
-    /// Indirect irradiance per pixel from the cache: in pixel order, pixels no record covers
-    /// get a new one; then new and flagged records are computed in parallel and interpolated.
-    fn cached_indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded]) -> Vec<Option<Rgb>> {
+    /// Indirect irradiance per pixel from the cache (`pixels.rs`): samples keep or look up
+    /// their records; in pixel order, samples no record covers get a new one; samples new
+    /// records reach look up again; new and flagged records are computed in parallel; each
+    /// sample interpolates its records. `renumbering`: how record indices changed since the
+    /// last tick's passes.
+    fn cached_indirect(
+        &mut self,
+        ctx: &RenderContext,
+        k: usize,
+        shaded: &[Shaded],
+        renumbering: Option<&[u32]>,
+    ) -> Vec<Option<Rgb>> {
         let min_distance = self.min_distance(ctx);
         let extent = self.extent(ctx);
+        let temporal = self.config.mode == CacheMode::Temporal;
         let cache = self.cache.get_or_insert_with(|| Cache::new(extent.lo, extent.hi, self.config.caching_radius));
-        if self.config.mode == CacheMode::Static {
+        if !temporal {
             cache.clear();
         }
-        let (vpls, changes, tick) = (&self.vpls, self.changes.as_ref(), ctx.tick);
-        // Coverage by records kept from earlier ticks does not depend on pixel order, so it is
-        // found in parallel; the rest is decided in pixel order, which keeps the image
-        // independent of the thread count. Flagged records (on demand) must be known before
-        // interpolation, so then every covering record is marked, not just the first found.
+        self.samples.resize_with(self.config.spp as usize, Vec::new);
+        let mut states = std::mem::take(&mut self.samples[k]);
+        let keep = temporal && states.len() == shaded.len();
+        if !keep {
+            states = vec![SampleState::default(); shaded.len()];
+        }
+        let hits: Vec<_> = shaded.iter().map(|s| pixels::hit_key(&s.sample)).collect();
+        let previous = if self.config.audit && keep { states.clone() } else { Vec::new() };
         let first_new = cache.records.len();
-        let flagged_used = AtomicFlags::new(if changes.is_some() { first_new } else { 0 });
-        let covered_by_kept: Vec<bool> = shaded
-            .par_iter()
-            .map(|s| match &s.sample.hit {
-                None => true,
-                Some(hit) if changes.is_some() => {
-                    let mut covered = false;
-                    cache.near(hit.p, hit.facing(), |i, _| {
-                        covered = true;
-                        flagged_used.set(i);
-                    });
-                    covered
-                }
-                Some(hit) => cache.covers(hit.p, hit.facing()),
-            })
-            .collect();
-        for (s, _) in shaded.iter().zip(&covered_by_kept).filter(|(_, &covered)| !covered) {
-            let Some(hit) = &s.sample.hit else { continue };
-            let n = hit.facing();
-            if !cache.covers(hit.p, n) {
-                cache.insert(Record::new(hit.p, n, hit.object, Vec::new(), tick));
-            }
-        }
-        let flagged_used = flagged_used.into_vec();
-        let works: Vec<(u64, Option<Refresh>)> = cache
-            .records
-            .par_iter_mut()
-            .enumerate()
-            .filter(|(i, r)| *i >= first_new || (r.stale && flagged_used.get(*i) == Some(&true)))
-            .map(|(i, r)| {
-                if i >= first_new {
-                    let (fresh, rays) =
-                        cache::compute_record(ctx.accel, vpls, r.position, r.normal, r.object, min_distance, tick);
-                    *r = fresh;
-                    (rays, None)
-                } else {
-                    r.stale = false;
-                    (0, changes.map(|c| c.refresh(ctx.accel, vpls, r, min_distance)))
-                }
-            })
-            .collect();
-        let used = AtomicFlags::new(cache.records.len());
-        let indirect: Vec<Option<Rgb>> = shaded
-            .par_iter()
-            .map(|s| {
-                let h = s.sample.hit.as_ref()?;
-                let (mut sum, mut weights) = (Rgb::BLACK, 0.0f32);
-                cache.near(h.p, h.facing(), |i, w| {
-                    used.set(i);
-                    sum += cache.records[i as usize].irradiance * w;
-                    weights += w;
-                });
-                Some(if weights > 0.0 { sum / weights } else { Rgb::BLACK })
-            })
-            .collect();
-        let used = used.into_vec();
-        for (r, _) in cache.records.iter_mut().zip(&used).filter(|(_, &u)| u) {
-            r.last_used = tick;
-        }
+        let looked = pixels::keep_or_look_up(cache, &mut states, &hits, renumbering, keep);
+        let cells = pixels::NewRecords::new(extent.lo, extent.hi, cache.reach());
+        let (new, coverage_tests) = pixels::place_records(cache, &states, ctx.tick, cells);
+        let relooked = pixels::look_up_near(cache, &mut states, &new);
+        let works = compute_records(ctx, cache, &self.vpls, self.changes.as_ref(), first_new, &states, min_distance);
+        let lookups = looked.iter().chain(&relooked).filter(|&&l| l).count() as u64 + coverage_tests;
+        let looked: Vec<bool> = looked.iter().zip(&relooked).map(|(a, b)| *a || *b).collect();
+        let looked_up = looked.iter().filter(|&&l| l).count() as u64;
+        let still = self.still && renumbering.is_none();
+        let (indirect, reused) = pixels::interpolate_all(&cache.records, &mut states, &looked, still);
         let stats = &mut self.pending;
-        stats.records_created += (cache.records.len() - first_new) as u64;
-        stats.records_reused += used[..first_new].iter().filter(|&&u| u).count() as u64;
+        stats.records_reused += mark_used(cache, &states, first_new, ctx.tick, looked_up == 0);
+        stats.records_created += new.count;
         for (rays, refresh) in works {
             stats.visibility_rays_new += rays;
             if let Some(w) = refresh {
@@ -335,8 +256,19 @@ impl InstantCache {
             }
         }
         stats.records = cache.records.len() as u64;
-        stats.samples_interpolated += shaded.len() as u64;
+        stats.samples_reused += reused;
+        stats.samples_interpolated += states.iter().filter(|s| s.hit.is_some()).count() as u64 - reused;
+        stats.samples_looked_up += looked_up;
+        stats.cache_lookups += lookups;
         stats.memory.set("cache", cache.memory_bytes());
+        if self.config.audit {
+            let audit = pixels::audit(cache, &states, &previous, renumbering);
+            stats.audit_samples_mismatched += audit.mismatched;
+            stats.audit_samples_needed += audit.needed;
+        }
+        if temporal {
+            self.samples[k] = states;
+        }
         indirect
     }
 
@@ -350,6 +282,29 @@ impl InstantCache {
         self.pending.audit_mismatched += audit.mismatched;
         self.pending.audit_off_surface += audit.off_surface;
         self.pending.audit_digest = audit.digest;
+    }
+
+    /// Pass `pass_in_tick`'s camera samples with their direct light.
+    fn shade(&self, ctx: &RenderContext, pass_in_tick: u64) -> Vec<Shaded> {
+        let (scene, pass) = (ctx.scene, self.passes);
+        let pixels = (scene.camera.width * scene.camera.height) as usize;
+        (0..pixels)
+            .into_par_iter()
+            .map(|i| {
+                let mut rng = Rng::for_sample(ctx.seed, ctx.tick, i as u64, pass);
+                let jitter = match self.config.mode {
+                    // The same sub-pixel points every tick, so a still view finds its records.
+                    CacheMode::Temporal => Rng::for_sample(ctx.seed, 0, i as u64, pass_in_tick).next_2d(),
+                    CacheMode::Igi | CacheMode::Static => rng.next_2d(),
+                };
+                let sample = camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng);
+                let (direct, shadow) = match &sample.hit {
+                    Some(hit) => camera_chain::direct_light(scene, ctx.accel, hit, &mut rng),
+                    None => (Rgb::BLACK, false),
+                };
+                Shaded { sample, direct, shadow }
+            })
+            .collect()
     }
 
     /// Indirect irradiance per pixel by IGI's interleaved gather and discontinuity buffer.
@@ -378,23 +333,55 @@ impl InstantCache {
     }
 }
 
-/// One flag per record, set from many threads.
-struct AtomicFlags(Vec<AtomicBool>);
-
-impl AtomicFlags {
-    fn new(len: usize) -> AtomicFlags {
-        AtomicFlags((0..len).map(|_| AtomicBool::new(false)).collect())
+/// Marks the records the samples use as used at `tick` and returns how many of those before
+/// `first_new` (kept from earlier ticks) there are. When every sample kept its list
+/// (`all_kept`), the records used are those used last tick, and no list is walked.
+fn mark_used(cache: &mut Cache, states: &[SampleState], first_new: usize, tick: u64, all_kept: bool) -> u64 {
+    let used = if all_kept {
+        cache.records.iter().map(|r| r.last_used + 1 >= tick).collect()
+    } else {
+        pixels::used(cache.records.len(), states)
+    };
+    for (r, _) in cache.records.iter_mut().zip(&used).filter(|(_, &u)| u) {
+        r.last_used = tick;
     }
+    used[..first_new].iter().filter(|&&u| u).count() as u64
+}
 
-    fn set(&self, i: u32) {
-        if let Some(flag) = self.0.get(i as usize) {
-            flag.store(true, Ordering::Relaxed);
-        }
-    }
-
-    fn into_vec(self) -> Vec<bool> {
-        self.0.into_iter().map(AtomicBool::into_inner).collect()
-    }
+/// Computes the records made this pass (from `first_new` on) and re-evaluates flagged
+/// (on-demand) records some sample uses, in parallel. Returns each one's new-record rays and
+/// refresh.
+fn compute_records(
+    ctx: &RenderContext,
+    cache: &mut Cache,
+    vpls: &[Vpl],
+    changes: Option<&TickChanges>,
+    first_new: usize,
+    states: &[SampleState],
+    min_distance: f32,
+) -> Vec<(u64, Option<Refresh>)> {
+    let flagged_used = match changes {
+        Some(_) => pixels::used(first_new, states),
+        None => Vec::new(),
+    };
+    let tick = ctx.tick;
+    cache
+        .records
+        .par_iter_mut()
+        .enumerate()
+        .filter(|(i, r)| *i >= first_new || (r.stale && flagged_used.get(*i) == Some(&true)))
+        .map(|(i, r)| {
+            if i >= first_new {
+                let (fresh, rays) =
+                    cache::compute_record(ctx.accel, vpls, r.position, r.normal, r.object, min_distance, tick);
+                *r = fresh;
+                (rays, None)
+            } else {
+                r.stale = false;
+                (0, changes.map(|c| c.refresh(ctx.accel, vpls, r, min_distance)))
+            }
+        })
+        .collect()
 }
 
 /// Adds one record's re-evaluation to the tick's figures.
@@ -444,38 +431,16 @@ impl Technique for InstantCache {
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
         let start = Instant::now();
         let scene = ctx.scene;
-        let pixels = (scene.camera.width * scene.camera.height) as usize;
-        for pass_in_tick in 0..self.config.spp as u64 {
-            let pass = self.passes;
-            let shaded: Vec<Shaded> = (0..pixels)
-                .into_par_iter()
-                .map(|i| {
-                    let mut rng = Rng::for_sample(ctx.seed, ctx.tick, i as u64, pass);
-                    let jitter = match self.config.mode {
-                        // The same sub-pixel points every tick, so a still view finds its records.
-                        CacheMode::Temporal => Rng::for_sample(ctx.seed, 0, i as u64, pass_in_tick).next_2d(),
-                        CacheMode::Igi | CacheMode::Static => rng.next_2d(),
-                    };
-                    let sample = camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng);
-                    let (direct, shadow) = match &sample.hit {
-                        Some(hit) => camera_chain::direct_light(scene, ctx.accel, hit, &mut rng),
-                        None => (Rgb::BLACK, false),
-                    };
-                    Shaded { sample, direct, shadow }
-                })
-                .collect();
+        // Taken once: every pass's kept lists date from the last tick's passes.
+        let renumbering = self.cache.as_mut().and_then(Cache::take_renumbering);
+        for pass_in_tick in 0..self.config.spp as usize {
+            let shaded = self.shade(ctx, pass_in_tick as u64);
             let t = Instant::now();
-            let k = pass_in_tick as usize;
             let indirect = match self.config.mode {
                 CacheMode::Igi => self.igi_indirect(ctx, &shaded),
-                CacheMode::Static | CacheMode::Temporal => match self.still_indirect(ctx, k, &shaded) {
-                    Some(kept) => kept,
-                    None => {
-                        let indirect = self.cached_indirect(ctx, &shaded);
-                        self.remember(k, &shaded, &indirect);
-                        indirect
-                    }
-                },
+                CacheMode::Static | CacheMode::Temporal => {
+                    self.cached_indirect(ctx, pass_in_tick, &shaded, renumbering.as_deref())
+                }
             };
             self.pending.indirect_ms += t.elapsed().as_secs_f64() * 1e3;
             if self.config.audit {
@@ -492,7 +457,7 @@ impl Technique for InstantCache {
                     s.sample.emitted + s.direct + reflected
                 })
                 .collect();
-            self.pending.camera_rays += pixels as u64;
+            self.pending.camera_rays += shaded.len() as u64;
             self.pending.specular_rays += shaded.iter().map(|s| s.sample.specular_rays).sum::<u64>();
             self.pending.shadow_rays += shaded.iter().filter(|s| s.shadow).count() as u64;
             film.accumulate_chunks(
@@ -509,8 +474,13 @@ impl Technique for InstantCache {
             film.passes += 1;
         }
         if self.config.mode == CacheMode::Temporal {
-            let samples: usize = self.last.iter().map(|l| l.hits.len()).sum();
-            self.pending.memory.set("last_tick", samples as u64 * LAST_BYTES_PER_SAMPLE);
+            let bytes: u64 = self
+                .samples
+                .iter()
+                .flatten()
+                .map(|s| pixels::STATE_BYTES + s.weights.capacity() as u64 * pixels::WEIGHT_BYTES)
+                .sum();
+            self.pending.memory.set("last_tick", bytes);
         }
         let mut stats = std::mem::take(&mut self.pending);
         stats.render_ms = start.elapsed().as_secs_f64() * 1e3;
