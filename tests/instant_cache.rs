@@ -159,6 +159,9 @@ fn bad_configurations_are_rejected_naming_the_field() {
         (InstantCacheConfig { vpls: 0, ..InstantCacheConfig::default() }, "vpls"),
         (InstantCacheConfig { interleave: 0, ..InstantCacheConfig::default() }, "interleave"),
         (InstantCacheConfig { caching_radius: f32::NAN, ..InstantCacheConfig::default() }, "caching_radius"),
+        (InstantCacheConfig { normal_tolerance: f32::NAN, ..InstantCacheConfig::default() }, "normal_tolerance"),
+        (InstantCacheConfig { normal_tolerance: 0.0, ..InstantCacheConfig::default() }, "normal_tolerance"),
+        (InstantCacheConfig { normal_tolerance: 91.0, ..InstantCacheConfig::default() }, "normal_tolerance"),
         (InstantCacheConfig { clamp_distance: -1.0, ..InstantCacheConfig::default() }, "clamp_distance"),
         (InstantCacheConfig { max_age: 0, ..InstantCacheConfig::default() }, "max_age"),
     ] {

@@ -65,11 +65,17 @@ impl TechniqueConfig {
             TechniqueConfig::InstantCache(c) => {
                 let mode = serde_json::to_value(c.mode).ok().and_then(|v| v.as_str().map(str::to_string));
                 let on_demand = c.reevaluation == super::instant_cache::Reevaluation::OnDemand;
+                let theta = c.normal_tolerance;
                 format!(
-                    "instant_cache:{}@{}{}",
+                    "instant_cache:{}@{}{}{}",
                     mode.unwrap_or_default(),
                     c.vpls,
-                    if on_demand { ":reevaluation=on_demand" } else { "" }
+                    if on_demand { ":reevaluation=on_demand" } else { "" },
+                    if theta == super::instant_cache::DEFAULT_NORMAL_TOLERANCE {
+                        String::new()
+                    } else {
+                        format!(":normal_tolerance={theta}")
+                    }
                 )
             }
             TechniqueConfig::ParticleGi(c) => match c.particles {

@@ -19,6 +19,9 @@ pub struct IcacheArgs {
     pub run: AnimationArgs,
     #[arg(long, default_value_t = 256)]
     pub vpls: u32,
+    /// θ of the caches, in degrees (default: `instant_cache`'s).
+    #[arg(long)]
+    pub normal_tolerance: Option<f32>,
     /// Check every record against a fresh computation after each frame (slow).
     #[arg(long)]
     pub audit: bool,
@@ -73,7 +76,9 @@ pub struct IcacheReport {
 
 /// The configurations compared, by label.
 fn configurations(args: &IcacheArgs) -> Vec<(&'static str, InstantCacheConfig)> {
-    let base = InstantCacheConfig { vpls: args.vpls, audit: args.audit, ..InstantCacheConfig::default() };
+    let defaults = InstantCacheConfig::default();
+    let normal_tolerance = args.normal_tolerance.unwrap_or(defaults.normal_tolerance);
+    let base = InstantCacheConfig { vpls: args.vpls, audit: args.audit, normal_tolerance, ..defaults };
     vec![
         ("igi", InstantCacheConfig { mode: CacheMode::Igi, audit: false, ..base.clone() }),
         ("static", InstantCacheConfig { mode: CacheMode::Static, ..base.clone() }),

@@ -3,13 +3,16 @@
 //!
 //! A record holds its position, its normal (on the side it was seen from), its irradiance and,
 //! per VPL, that VPL's contribution packed as RGBE (4 bytes), so one VPL's visibility can later
-//! be re-evaluated alone. Weights follow eq. 5 without the harmonic mean distance:
-//! w_k(x) = (‖x − x_k‖ + √(1 − n·n_k))⁻¹, distances in units of the scene's bounding diagonal so
-//! `caching_radius` a is scale-free; records with w_k(x) > 1/a are used, and where none is, a
-//! new one is made (on demand).
+//! be re-evaluated alone. Weights follow eq. 5 without the harmonic mean distance, with the
+//! distance and the normal given their own tolerances (as Tabellion and Lamorlette do):
+//! w_k(x) = (‖x − x_k‖ / (a·D) + √(1 − n·n_k) / √(1 − cos θ))⁻¹, where D is the scene's
+//! bounding diagonal (so `caching_radius` a is scale-free) and θ is `normal_tolerance`. Records
+//! with w_k(x) > 1 are used, and where none is, a new one is made (on demand). The paper's
+//! single tolerance is θ = acos(1 − a²) (4.05° at a = 0.05): its weights are these times 1/a,
+//! which the interpolation's normalisation cancels.
 use super::octree::Octree;
 use super::rgbe;
-use super::vpl::{irradiance_from, visibility_ray, Vpl};
+use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
 use crate::core::Rgb;
 use crate::scene::SceneAccel;
 use glam::Vec3;
@@ -42,15 +45,20 @@ impl Record {
 /// traced for it (0 or 1).
 pub fn contribution(accel: &SceneAccel, vpl: &Vpl, p: Vec3, n: Vec3, min_distance: f32) -> (u32, u64) {
     let Some((e, _, _)) = irradiance_from(vpl, p, n, min_distance) else { return (0, 0) };
-    if accel.scene().occluded1(&visibility_ray(p, n, vpl)) {
+    if accel.scene().occluded1(&visibility_ray(ray_origin(p, n), vpl)) {
         (0, 1)
     } else {
         (rgbe::pack(e), 1)
     }
 }
 
+/// Lanes per packet of a new record's visibility rays (they share an origin, so Embree's
+/// packet kernels traverse them together; chosen by `bench icache`: 8 beat 1 and 16 here).
+const RECORD_PACKET: usize = 8;
+
 /// Computes a record at `p` (unit normal `n` facing the viewer) from every VPL, with one
-/// visibility ray each. Returns the record and the rays traced.
+/// visibility ray each, traced in packets of [`RECORD_PACKET`]. Returns the record and the
+/// rays traced.
 pub fn compute_record(
     accel: &SceneAccel,
     vpls: &[Vpl],
@@ -60,16 +68,26 @@ pub fn compute_record(
     min_distance: f32,
     tick: u64,
 ) -> (Record, u64) {
-    let mut rays = 0;
-    let contributions = vpls
+    let mut contributions = vec![0u32; vpls.len()];
+    let lit: Vec<(usize, Rgb)> = vpls
         .iter()
-        .map(|vpl| {
-            let (c, traced) = contribution(accel, vpl, p, n, min_distance);
-            rays += traced;
-            c
-        })
+        .enumerate()
+        .filter_map(|(i, vpl)| irradiance_from(vpl, p, n, min_distance).map(|(e, _, _)| (i, e)))
         .collect();
-    (Record::new(p, n, object, contributions, tick), rays)
+    let from = ray_origin(p, n);
+    let mut rays = [crate::embree::Ray::new(p, n); RECORD_PACKET];
+    let mut occluded = [false; RECORD_PACKET];
+    for chunk in lit.chunks(RECORD_PACKET) {
+        let active: [bool; RECORD_PACKET] = std::array::from_fn(|k| k < chunk.len());
+        for (ray, &(i, _)) in rays.iter_mut().zip(chunk) {
+            *ray = visibility_ray(from, &vpls[i]);
+        }
+        accel.scene().occluded_lanes(&rays, &active, &mut occluded);
+        for (&(i, e), &blocked) in chunk.iter().zip(&occluded) {
+            contributions[i] = if blocked { 0 } else { rgbe::pack(e) };
+        }
+    }
+    (Record::new(p, n, object, contributions, tick), lit.len() as u64)
 }
 
 /// What the octree keeps of a record: enough to weigh it without touching the record.
@@ -84,10 +102,10 @@ struct Key {
 pub struct Cache {
     pub records: Vec<Record>,
     octree: Octree<Key>,
-    /// The scene's bounding diagonal: the unit of the weight's distance.
-    scale: f32,
-    /// a, in units of `scale`.
-    radius: f32,
+    /// a·D: how far a record reaches, in scene units.
+    reach: f32,
+    /// 1/√(1 − cos θ): the normal term's scale.
+    normal_scale: f32,
     /// Since the last [`Cache::take_renumbering`]: each record index then → its index now, or
     /// [`GONE`]; `None` while no record went.
     renumbering: Option<Vec<u32>>,
@@ -97,11 +115,13 @@ pub struct Cache {
 pub const GONE: u32 = u32::MAX;
 
 impl Cache {
-    /// An empty cache over the scene bounds `(lo, hi)` with caching radius `radius` (relative).
-    pub fn new(lo: Vec3, hi: Vec3, radius: f32) -> Cache {
-        let scale = (hi - lo).length().max(f32::MIN_POSITIVE);
-        let octree = Octree::new((lo + hi) * 0.5, (hi - lo).max_element() * 0.5, radius * scale / 2.0);
-        Cache { records: Vec::new(), octree, scale, radius, renumbering: None }
+    /// An empty cache over the scene bounds `(lo, hi)` with caching radius `radius` (relative
+    /// to their diagonal) and normal tolerance `normal_tolerance_deg` (degrees, in (0, 90]).
+    pub fn new(lo: Vec3, hi: Vec3, radius: f32, normal_tolerance_deg: f32) -> Cache {
+        let reach = radius * (hi - lo).length().max(f32::MIN_POSITIVE);
+        let octree = Octree::new((lo + hi) * 0.5, (hi - lo).max_element() * 0.5, reach / 2.0);
+        let normal_scale = 1.0 / (1.0 - normal_tolerance_deg.to_radians().cos()).max(f32::EPSILON).sqrt();
+        Cache { records: Vec::new(), octree, reach, normal_scale, renumbering: None }
     }
 
     pub fn clear(&mut self) {
@@ -157,27 +177,27 @@ impl Cache {
         index
     }
 
-    /// Calls `f(index, w)` for every record with eq. 5's weight w > 1/a at `p` (unit normal
-    /// `n`) until `f` returns false. A record farther than a cannot qualify, so the square root
-    /// waits for the distance test. Returns false if `f` stopped it.
+    /// Calls `f(index, w)` for every record with weight w > 1 at `p` (unit normal `n`) until
+    /// `f` returns false. A record farther than a·D cannot qualify, so the square roots wait
+    /// for the distance test. Returns false if `f` stopped it.
     fn visit(&self, p: Vec3, n: Vec3, mut f: impl FnMut(u32, f32) -> bool) -> bool {
-        let reach = self.radius * self.scale;
+        let reach = self.reach;
         self.octree.query(p, reach, |key| {
             let d2 = (p - key.position).length_squared();
             if d2 >= reach * reach {
                 return true;
             }
-            let inverse = d2.sqrt() / self.scale + (1.0 - n.dot(key.normal)).max(0.0).sqrt();
-            inverse >= self.radius || f(key.index, 1.0 / inverse.max(1e-12))
+            let inverse = d2.sqrt() / reach + (1.0 - n.dot(key.normal)).max(0.0).sqrt() * self.normal_scale;
+            inverse >= 1.0 || f(key.index, 1.0 / inverse.max(1e-12))
         })
     }
 
-    /// How far a record reaches: a, in scene units.
+    /// How far a record reaches: a·D, in scene units.
     pub fn reach(&self) -> f32 {
-        self.radius * self.scale
+        self.reach
     }
 
-    /// Calls `f(index, w)` for every record with w > 1/a at `p`.
+    /// Calls `f(index, w)` for every record with w > 1 at `p`.
     pub fn near(&self, p: Vec3, n: Vec3, mut f: impl FnMut(u32, f32)) {
         self.visit(p, n, |i, w| {
             f(i, w);
@@ -185,7 +205,7 @@ impl Cache {
         });
     }
 
-    /// Does some record have w > 1/a at `p`? (Stops at the first.)
+    /// Does some record have w > 1 at `p`? (Stops at the first.)
     pub fn covers(&self, p: Vec3, n: Vec3) -> bool {
         !self.visit(p, n, |_, _| false)
     }

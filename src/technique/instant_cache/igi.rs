@@ -2,7 +2,7 @@
 //! takes a different subset of the VPLs by interleaved sampling in an n×n pattern, and a
 //! discontinuity buffer averages each pixel with its n×n neighbours on the same surface, so
 //! every VPL counts once per neighbourhood and the structured noise is filtered away.
-use super::vpl::{irradiance_from, visibility_ray, Vpl};
+use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
 use crate::core::Rgb;
 use crate::scene::SceneAccel;
 use crate::technique::camera_chain::DiffuseHit;
@@ -24,11 +24,12 @@ pub fn subset_irradiance(
     min_distance: f32,
 ) -> (Rgb, u64) {
     let facing = hit.facing();
+    let from = ray_origin(hit.p, facing);
     let (mut e, mut rays) = (Rgb::BLACK, 0);
     for vpl in vpls.iter().skip(subset).step_by(n2) {
         let Some((contribution, _, _)) = irradiance_from(vpl, hit.p, facing, min_distance) else { continue };
         rays += 1;
-        if !accel.scene().occluded1(&visibility_ray(hit.p, facing, vpl)) {
+        if !accel.scene().occluded1(&visibility_ray(from, vpl)) {
             e += contribution;
         }
     }

@@ -41,6 +41,7 @@
 //! | `vpls` | 256 | VPLs per tick, on average (⌈vpls·(1 − ρ_S)⌉ paths are shot; at most 4× are kept) |
 //! | `interleave` | 4 | n of `igi`'s n×n interleaved sampling |
 //! | `caching_radius` | 0.05 | a, in units of the scene's bounding diagonal |
+//! | `normal_tolerance` | 10 | θ, degrees a normal may turn before a record stops serving it (the paper's eq. 5 ties it to a: acos(1 − a²), 4.05°) |
 //! | `clamp_distance` | 0.01 | min_d of G′'s clamp, in units of the scene's bounding diagonal |
 //! | `max_bounces` | none | bounces a VPL path may take; none: until Russian roulette ends it |
 //! | `spp` | 1 | camera samples per pixel per tick |
@@ -77,7 +78,7 @@ mod rgbe;
 mod temporal;
 mod vpl;
 
-pub use config::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation, MAX_VPLS};
+pub use config::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation, DEFAULT_NORMAL_TOLERANCE, MAX_VPLS};
 
 use super::camera_chain::{self, CameraSample, DiffuseHit};
 use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
@@ -118,7 +119,8 @@ pub struct InstantCache {
     /// `temporal`: nothing this tick can change a cached irradiance (no scene change, so the
     /// same VPLs and records), so a sample that keeps its records keeps its result.
     still: bool,
-    /// `temporal`: each pass's samples and their interpolation (`pixels.rs`), from the last tick.
+    /// Each pass's samples and their interpolation (`pixels.rs`), from the last tick (`static`
+    /// keeps only their allocations).
     samples: Vec<Vec<SampleState>>,
 }
 
@@ -223,16 +225,19 @@ impl InstantCache {
         let min_distance = self.min_distance(ctx);
         let extent = self.extent(ctx);
         let temporal = self.config.mode == CacheMode::Temporal;
-        let cache = self.cache.get_or_insert_with(|| Cache::new(extent.lo, extent.hi, self.config.caching_radius));
+        let cache = self.cache.get_or_insert_with(|| {
+            Cache::new(extent.lo, extent.hi, self.config.caching_radius, self.config.normal_tolerance)
+        });
         if !temporal {
             cache.clear();
         }
+        // `static` keeps the states too, for their allocations, but not their lists.
         self.samples.resize_with(self.config.spp as usize, Vec::new);
         let mut states = std::mem::take(&mut self.samples[k]);
-        let keep = temporal && states.len() == shaded.len();
-        if !keep {
+        if states.len() != shaded.len() {
             states = vec![SampleState::default(); shaded.len()];
         }
+        let keep = temporal;
         let hits: Vec<_> = shaded.iter().map(|s| pixels::hit_key(&s.sample)).collect();
         let previous = if self.config.audit && keep { states.clone() } else { Vec::new() };
         let first_new = cache.records.len();
@@ -266,9 +271,7 @@ impl InstantCache {
             stats.audit_samples_mismatched += audit.mismatched;
             stats.audit_samples_needed += audit.needed;
         }
-        if temporal {
-            self.samples[k] = states;
-        }
+        self.samples[k] = states;
         indirect
     }
 
@@ -473,14 +476,14 @@ impl Technique for InstantCache {
             self.passes += 1;
             film.passes += 1;
         }
-        if self.config.mode == CacheMode::Temporal {
+        if self.config.mode != CacheMode::Igi {
             let bytes: u64 = self
                 .samples
                 .iter()
                 .flatten()
                 .map(|s| pixels::STATE_BYTES + s.weights.capacity() as u64 * pixels::WEIGHT_BYTES)
                 .sum();
-            self.pending.memory.set("last_tick", bytes);
+            self.pending.memory.set("samples", bytes);
         }
         let mut stats = std::mem::take(&mut self.pending);
         stats.render_ms = start.elapsed().as_secs_f64() * 1e3;

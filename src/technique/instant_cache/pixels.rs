@@ -1,4 +1,4 @@
-//! Each camera sample's interpolation (eq. 4): the records with w_k(x) > 1/a at its first
+//! Each camera sample's interpolation (eq. 4): the records with w_k(x) > 1 at its first
 //! diffuse hit x and their weights, which `temporal` keeps from tick to tick.
 //!
 //! A sample looks the cache up (one octree query) only when it must: its hit changed, one of
@@ -32,7 +32,7 @@ pub fn hit_key(sample: &CameraSample) -> Option<HitKey> {
 #[derive(Clone, Debug, Default)]
 pub struct SampleState {
     pub hit: Option<HitKey>,
-    /// The records with w > 1/a at the hit and their weights, by record index.
+    /// The records with w > 1 at the hit and their weights, by record index.
     pub weights: Vec<(u32, f32)>,
     /// The irradiance interpolated from them.
     pub indirect: Option<Rgb>,
@@ -43,7 +43,7 @@ pub const STATE_BYTES: u64 = std::mem::size_of::<SampleState>() as u64;
 /// Bytes per weight entry.
 pub const WEIGHT_BYTES: u64 = std::mem::size_of::<(u32, f32)>() as u64;
 
-/// The records with w > 1/a at `hit`, by index.
+/// The records with w > 1 at `hit`, by index.
 fn look_up(cache: &Cache, hit: HitKey, weights: &mut Vec<(u32, f32)>) {
     weights.clear();
     cache.near(hit.0, hit.1, |i, w| weights.push((i, w)));
@@ -289,7 +289,7 @@ mod tests {
 
     /// A cache over the unit cube (a = 0.05 of its diagonal) with records on a plane (normal +z).
     fn plane_cache(points: &[Vec3]) -> Cache {
-        let mut cache = Cache::new(Vec3::ZERO, Vec3::ONE, 0.05);
+        let mut cache = Cache::new(Vec3::ZERO, Vec3::ONE, 0.05, 10.0);
         for (i, &p) in points.iter().enumerate() {
             let mut r = Record::new(p, Vec3::Z, 0, Vec::new(), 0);
             r.irradiance = Rgb::new(i as f32 + 1.0, 1.0, 1.0);

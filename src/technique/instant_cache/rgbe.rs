@@ -11,9 +11,9 @@ pub fn pack(c: Rgb) -> u32 {
     if m < 1e-32 {
         return 0;
     }
-    // m = f · 2^e with f in [0.5, 1).
-    let e = m.log2().floor() as i32 + 1;
-    let scale = 256.0 / (e as f32).exp2();
+    // m = f · 2^e with f in [0.5, 1), read off m's exponent bits (m ≥ 1e-32 is normal).
+    let e = ((m.to_bits() >> 23) & 0xFF) as i32 - 126;
+    let scale = 256.0 * pow2(-e);
     let q = |x: f32| ((x * scale) as u32).min(255);
     (q(r) << 24) | (q(g) << 16) | (q(b) << 8) | ((e + 128).clamp(0, 255) as u32)
 }
@@ -24,7 +24,7 @@ pub fn unpack(v: u32) -> Rgb {
     if e == 0 && v >> 8 == 0 {
         return Rgb::BLACK;
     }
-    let scale = ((e - 128) as f32).exp2() / 256.0;
+    let scale = pow2(e - 136);
     let d = |shift: u32| {
         let m = (v >> shift) & 0xFF;
         if m == 0 {
@@ -34,6 +34,16 @@ pub fn unpack(v: u32) -> Rgb {
         }
     };
     Rgb::new(d(24), d(16), d(8))
+}
+
+/// 2^k, exact, built from its bits where it is a normal float (libm's `exp2f` is the slow
+/// path, for the subnormal rest).
+fn pow2(k: i32) -> f32 {
+    if (-126..=127).contains(&k) {
+        f32::from_bits(((k + 127) as u32) << 23)
+    } else {
+        (k as f32).exp2()
+    }
 }
 
 #[cfg(test)]
@@ -52,6 +62,9 @@ mod tests {
                 // Half a mantissa step of the shared exponent: at most 2⁻⁸ of 2^e ≤ 2m.
                 assert!((a - b).abs() <= m / 128.0 + 1e-30, "{c:?} → {back:?}");
             }
+        }
+        for k in -149..=127 {
+            assert_eq!(pow2(k), (k as f32).exp2(), "2^{k}");
         }
         assert_eq!(unpack(pack(Rgb::BLACK)), Rgb::BLACK);
         assert_eq!(unpack(pack(Rgb::new(-1.0, f32::NAN, 0.0))), Rgb::BLACK);

@@ -28,7 +28,7 @@
 //! when a VPL's intensity changes, and then such a ray is retraced.
 use super::cache::{contribution, Record};
 use super::rgbe;
-use super::vpl::{irradiance_from, visibility_ray, Vpl};
+use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
 use crate::embree::{CommittedScene, EmbreeError};
 use crate::scene::edits::{Aabb, MovedSurface, SceneDelta};
 use crate::scene::{Scene, SceneAccel, SurfaceId};
@@ -179,6 +179,7 @@ impl TickChanges {
     /// computation with `vpls` would make it.
     pub fn refresh(&self, accel: &SceneAccel, vpls: &[Vpl], record: &mut Record, min_distance: f32) -> Refresh {
         let (p, n) = (record.position, record.normal);
+        let from = ray_origin(p, n);
         let mut work = Refresh::default();
         let contributions: Vec<u32> = vpls
             .iter()
@@ -200,7 +201,7 @@ impl TickChanges {
                         return self.retrace(accel, vpl, p, n, min_distance, &mut work);
                     }
                 }
-                let visible = self.still_visible(accel, vpl, p, n, visible_before, &mut work);
+                let visible = self.still_visible(accel, vpl, from, visible_before, &mut work);
                 let now = if visible { rgbe::pack(e) } else { 0 };
                 work.reweighted += u64::from(now != before && visible_before && visible);
                 match (visible_before, visible) {
@@ -211,7 +212,10 @@ impl TickChanges {
                 now
             })
             .collect();
-        *record = Record::new(p, n, record.object, contributions, record.last_used);
+        // Unchanged contributions sum to the same bits: only a changed record is re-summed.
+        if contributions != record.contributions {
+            *record = Record::new(p, n, record.object, contributions, record.last_used);
+        }
         work
     }
 
@@ -227,13 +231,12 @@ impl TickChanges {
         &self,
         accel: &SceneAccel,
         vpl: &Vpl,
-        p: Vec3,
-        n: Vec3,
+        from: Vec3,
         visible_before: bool,
         work: &mut Refresh,
     ) -> bool {
         let Some(moved_now) = &self.moved_now else { return visible_before };
-        let ray = visibility_ray(p, n, vpl);
+        let ray = visibility_ray(from, vpl);
         // Case 3: a moved surface now lies on the ray.
         let (near_new, tests) = self.new_boxes.hits(ray.origin, ray.dir, ray.tfar);
         work.occlusion_box_tests += tests;

@@ -83,6 +83,8 @@ pub struct Vpl {
     pub normal: Vec3,
     /// Φ·ρ/π (W/sr per unit cosine).
     pub intensity: Rgb,
+    /// Where visibility rays to the VPL end: its position offset off its lit side.
+    pub anchor: Vec3,
     pub object: u32,
     /// Stable identity: (path index − 1) · [`MAX_VPL_BOUNCES`] + bounce. Ticks compare VPLs by
     /// key, so a path that gains or loses a bounce does not renumber the VPLs of later paths.
@@ -158,7 +160,14 @@ fn shoot_path(
             let facing = if sp.n.dot(wo) >= 0.0 { sp.n } else { -sp.n };
             let intensity = power * material.diffuse_reflectance() * FRAC_1_PI;
             let key = (index - 1) as u32 * MAX_VPL_BOUNCES + bounce as u32;
-            shot.vpls.push(Vpl { position: sp.p, normal: facing, intensity, object, key });
+            shot.vpls.push(Vpl {
+                position: sp.p,
+                normal: facing,
+                intensity,
+                anchor: offset_ray_origin(sp.p, facing),
+                object,
+                key,
+            });
         }
         let [d0, d1, lobe, roulette] = bounce_samples(index, bounce);
         let Some(bs) = material.sample(sp.n, wo, Vec2::new(d0, d1), lobe) else { break };
@@ -172,13 +181,16 @@ fn shoot_path(
     }
 }
 
-/// The visibility ray from `x` (unit normal `n` on the side it looks from) to `vpl`: both ends
-/// leave their surface on their lit side, so a ray between the two sides of one thin wall
-/// crosses it and is occluded.
-pub fn visibility_ray(x: Vec3, n: Vec3, vpl: &Vpl) -> Ray {
-    let from = offset_ray_origin(x, n);
-    let to = offset_ray_origin(vpl.position, vpl.normal);
-    let span = to - from;
+/// Where visibility rays from `x` (unit normal `n` on the side it looks from) start.
+pub fn ray_origin(x: Vec3, n: Vec3) -> Vec3 {
+    offset_ray_origin(x, n)
+}
+
+/// The visibility ray from `from` ([`ray_origin`] of a point) to `vpl`: both ends leave their
+/// surface on their lit side, so a ray between the two sides of one thin wall crosses it and
+/// is occluded.
+pub fn visibility_ray(from: Vec3, vpl: &Vpl) -> Ray {
+    let span = vpl.anchor - from;
     let length = span.length().max(f32::MIN_POSITIVE);
     Ray { origin: from, dir: span / length, tnear: 0.0, tfar: length * (1.0 - crate::technique::nee::SHADOW_EPSILON) }
 }
