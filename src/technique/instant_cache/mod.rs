@@ -238,7 +238,17 @@ impl InstantCache {
             states = vec![SampleState::default(); shaded.len()];
         }
         let keep = temporal;
-        let hits: Vec<_> = shaded.iter().map(|s| pixels::hit_key(&s.sample)).collect();
+        let hits: Vec<_> = shaded.par_iter().map(|s| pixels::hit_key(&s.sample)).collect();
+        if self.still && renumbering.is_none() {
+            if let Some(kept) = pixels::all_kept(&states, &hits) {
+                self.pending.records_reused += mark_used(cache, &states, cache.records.len(), ctx.tick, true);
+                self.pending.samples_reused += hits.iter().filter(|h| h.is_some()).count() as u64;
+                self.pending.records = cache.records.len() as u64;
+                self.pending.memory.set("cache", cache.memory_bytes());
+                self.samples[k] = states;
+                return kept;
+            }
+        }
         let previous = if self.config.audit && keep { states.clone() } else { Vec::new() };
         let first_new = cache.records.len();
         let looked = pixels::keep_or_look_up(cache, &mut states, &hits, renumbering, keep);

@@ -58,6 +58,13 @@ fn renumber(weights: &mut [(u32, f32)], renumbering: &[u32]) -> bool {
     })
 }
 
+/// A still tick's shortcut: if every sample found last tick's hit, their kept irradiance (no
+/// record changed, and none is needed); else `None`.
+pub fn all_kept(states: &[SampleState], hits: &[Option<HitKey>]) -> Option<Vec<Option<Rgb>>> {
+    let same = states.len() == hits.len() && states.par_iter().zip(hits).all(|(s, h)| s.hit == *h);
+    same.then(|| states.par_iter().map(|s| s.indirect).collect())
+}
+
 /// Step 1 of a pass: each sample keeps its list (`keep`, same hit, no record of it gone) or
 /// looks the cache up; in an empty cache (rebuilt each tick by `static`, or the first) there
 /// is nothing to find, and step 2 tests every sample's coverage. Returns per sample whether it
