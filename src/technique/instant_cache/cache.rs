@@ -257,3 +257,57 @@ pub fn audit(accel: &SceneAccel, cache: &Cache, vpls: &[Vpl], min_distance: f32,
     keys.hash(&mut hasher);
     Audit { records: checked.len() as u64, mismatched, off_surface, digest: hasher.finish() }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Random unit vectors near +z (within about 25°), so normal terms span the tolerance.
+    fn near_z(rng: &mut crate::core::Rng) -> Vec3 {
+        Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 2.0).normalize()
+    }
+
+    #[test]
+    fn the_papers_tolerance_is_the_single_tolerance_of_eq_5() {
+        // Property: with θ = acos(1 − a²), the records used and their relative weights are eq. 5's
+        // with one tolerance a (w = (d/D + √(1 − n·n_k))⁻¹ > 1/a), checked by brute force on random
+        // records. Negative control: θ = 10° uses records eq. 5 would not.
+        let (a, extent) = (0.05f32, Vec3::ONE);
+        let diagonal = extent.length();
+        let theta = (1.0 - a * a).acos().to_degrees();
+        let mut rng = crate::core::Rng::new(11, 12);
+        let mut cache = Cache::new(Vec3::ZERO, extent, a, theta);
+        let mut wide = Cache::new(Vec3::ZERO, extent, a, 10.0);
+        let mut records = Vec::new();
+        for _ in 0..2000 {
+            let (p, n) = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()), near_z(&mut rng));
+            cache.insert(Record::new(p, n, 0, Vec::new(), 0));
+            wide.insert(Record::new(p, n, 0, Vec::new(), 0));
+            records.push((p, n));
+        }
+        let mut extra = 0;
+        for _ in 0..300 {
+            let (x, n) = (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()), near_z(&mut rng));
+            let eq5: Vec<(u32, f32)> = records
+                .iter()
+                .enumerate()
+                .map(|(i, (p, m))| (i as u32, (x - *p).length() / diagonal + (1.0 - n.dot(*m)).max(0.0).sqrt()))
+                .filter(|&(_, inverse)| (inverse - a).abs() > 1e-5)
+                .collect();
+            let mut found = Vec::new();
+            cache.near(x, n, |i, w| found.push((i, w)));
+            for &(i, inverse) in &eq5 {
+                let hit = found.iter().find(|f| f.0 == i);
+                assert_eq!(hit.is_some(), inverse < a, "record {i}: 1/w = {inverse}");
+                if let Some(&(_, w)) = hit {
+                    // Weights scaled by 1/a, which the interpolation's normalisation cancels.
+                    assert!((w * inverse - a).abs() <= 1e-3 * a, "record {i}: w = {w}, eq. 5: {}", 1.0 / inverse);
+                }
+            }
+            let mut wider = 0;
+            wide.near(x, n, |_, _| wider += 1);
+            extra += wider - found.len();
+        }
+        assert!(extra > 0, "θ = 10° should reach records eq. 5 does not");
+    }
+}
