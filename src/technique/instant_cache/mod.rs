@@ -15,10 +15,11 @@
 //!    - `igi` (`igi.rs`): each pixel gathers its n×n-interleaved subset of the VPLs with
 //!      visibility rays, then a discontinuity buffer averages the n×n neighbourhood.
 //!    - `static` (`cache.rs`, `octree.rs`, `pixels.rs`): an irradiance cache cleared every
-//!      tick. In pixel order, a record is made wherever no record has w_k(x) > 1/a (eq. 5);
-//!      records are computed in parallel, each with one visibility ray per VPL and G′
-//!      (eqs. 2–3), and every pixel interpolates them (eq. 4). Deciding where records go in pixel order keeps the
-//!      image independent of the thread count.
+//!      tick. In pixel order, a record is made wherever no record has weight w_k(x) > 1 (eq. 5,
+//!      with the distance and normal tolerances apart: `cache.rs`); records are computed in
+//!      parallel, each with one visibility ray per VPL and G′ (eqs. 2–3), and every pixel
+//!      interpolates them (eq. 4). Deciding where records go in pixel order keeps the image
+//!      independent of the thread count.
 //!    - `temporal` (`temporal.rs`, §3.2, Algorithm 1): the same cache kept across ticks. At
 //!      the start of a tick, records unused for `max_age` ticks go; if VPLs changed or
 //!      surfaces moved, records on a moved object go (case 5) and the rest
@@ -237,9 +238,10 @@ impl InstantCache {
         if states.len() != shaded.len() {
             states = vec![SampleState::default(); shaded.len()];
         }
-        let keep = temporal;
         let hits: Vec<_> = shaded.par_iter().map(|s| pixels::hit_key(&s.sample)).collect();
-        if self.still && renumbering.is_none() {
+        // No record changed or went: samples that keep their records keep their irradiance.
+        let still = self.still && renumbering.is_none();
+        if still {
             if let Some(kept) = pixels::all_kept(&states, &hits) {
                 self.pending.records_reused += mark_used(cache, &states, cache.records.len(), ctx.tick, true);
                 self.pending.samples_reused += hits.iter().filter(|h| h.is_some()).count() as u64;
@@ -249,9 +251,9 @@ impl InstantCache {
                 return kept;
             }
         }
-        let previous = if self.config.audit && keep { states.clone() } else { Vec::new() };
+        let previous = if self.config.audit && temporal { states.clone() } else { Vec::new() };
         let first_new = cache.records.len();
-        let looked = pixels::keep_or_look_up(cache, &mut states, &hits, renumbering, keep);
+        let looked = pixels::keep_or_look_up(cache, &mut states, &hits, renumbering, temporal);
         let cells = pixels::NewRecords::new(extent.lo, extent.hi, cache.reach());
         let (new, coverage_tests) = pixels::place_records(cache, &states, ctx.tick, cells);
         let relooked = pixels::look_up_near(cache, &mut states, &new);
@@ -259,7 +261,6 @@ impl InstantCache {
         let lookups = looked.iter().chain(&relooked).filter(|&&l| l).count() as u64 + coverage_tests;
         let looked: Vec<bool> = looked.iter().zip(&relooked).map(|(a, b)| *a || *b).collect();
         let looked_up = looked.iter().filter(|&&l| l).count() as u64;
-        let still = self.still && renumbering.is_none();
         let (indirect, reused) = pixels::interpolate_all(&cache.records, &mut states, &looked, still);
         let stats = &mut self.pending;
         stats.records_reused += mark_used(cache, &states, first_new, ctx.tick, looked_up == 0);
