@@ -134,7 +134,7 @@ fn a_static_scene_settles_to_no_work() {
 fn a_moved_object_makes_only_the_samples_it_changed_look_up() {
     // Property: when the slab shifts, the samples that look the cache up are those whose hit
     // or records changed (the audit counts them: `audit_samples_needed`), give or take the
-    // new-record cells' slack (at most 3x), and every other sample keeps its records with
+    // new-record cells' slack (bounded below), and every other sample keeps its records with
     // lists a fresh lookup confirms (`assert_exact`). The slab covers a minority of the view,
     // so this is far from every sample; the code before per-sample keeping looked up all 576
     // (checked), which fails the bound.
@@ -151,7 +151,9 @@ fn a_moved_object_makes_only_the_samples_it_changed_look_up() {
             assert_exact(&label, &moved);
             assert!(moved.records_removed_moved > 0 && moved.audit_samples_needed > 0, "{label}: {moved:?}");
             assert!(moved.samples_looked_up >= moved.audit_samples_needed, "{label}: {moved:?}");
-            assert!(moved.samples_looked_up <= 3 * moved.audit_samples_needed, "{label}: too many: {moved:?}");
+            // A new record marks 3 cells per axis, each under two reaches wide: on a surface at
+            // most (6r)² against the πr² it reaches, about 11.5 times the samples it can change.
+            assert!(moved.samples_looked_up <= 12 * moved.audit_samples_needed, "{label}: too many: {moved:?}");
             assert!(moved.samples_looked_up < 24 * 24 / 2, "{label}: {moved:?}");
         }
     });

@@ -114,7 +114,8 @@ pub struct NewRecords {
 impl NewRecords {
     pub fn new(lo: Vec3, hi: Vec3, reach: f32) -> NewRecords {
         let size = (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
-        let dims = (size / reach.max(f32::MIN_POSITIVE)).ceil().clamp(Vec3::ONE, Vec3::splat(64.0));
+        // Rounded down, so cells are at least `reach` wide (one cell on an axis shorter than it).
+        let dims = (size / reach.max(f32::MIN_POSITIVE)).floor().clamp(Vec3::ONE, Vec3::splat(64.0));
         let cell = size / dims;
         let dims = [dims.x as i32, dims.y as i32, dims.z as i32];
         NewRecords { lo, cell, dims, marked: vec![false; (dims[0] * dims[1] * dims[2]) as usize], count: 0 }
@@ -345,17 +346,22 @@ mod tests {
         // Property: a point within the reach of a new record lies in a marked cell, also
         // outside the grid's extent (border cells). Checked against distances on random points.
         let mut rng = crate::core::Rng::new(3, 4);
-        let reach = 0.07;
-        let mut new = NewRecords::new(Vec3::ZERO, Vec3::new(1.0, 0.5, 2.0), reach);
-        let mut v = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) * 3.0 - Vec3::ONE;
-        let records: Vec<Vec3> = (0..20).map(|_| v()).collect();
-        records.iter().for_each(|&p| new.mark(p));
+        // A reach that does not divide the extent: rounding the cell count up would make cells
+        // narrower than the reach (0.25 for 0.3 on the unit axis), and this check fails then.
+        let reach = 0.3;
+        let mut u = || Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32());
         let mut reached = 0;
-        for _ in 0..20_000 {
-            let p = v();
-            if records.iter().any(|&r| (r - p).length() <= reach) {
-                reached += 1;
-                assert!(new.near(p), "{p:?} is reached but not marked");
+        for _ in 0..200 {
+            // One record, mostly inside the grid, and points around it out to its reach.
+            let mut new = NewRecords::new(Vec3::ZERO, Vec3::new(1.0, 0.7, 2.0), reach);
+            let record = u() * Vec3::new(1.2, 0.9, 2.2) - 0.1;
+            new.mark(record);
+            for _ in 0..200 {
+                let p = record + (u() * 2.0 - Vec3::ONE) * reach;
+                if (record - p).length() <= reach {
+                    reached += 1;
+                    assert!(new.near(p), "{p:?} is within reach of {record:?} but not marked");
+                }
             }
         }
         assert!(reached > 10, "the check saw too few reached points ({reached})");
