@@ -13,6 +13,7 @@ fn every_estimate_covers_what_the_first_tick_holds() {
     // be wildly above it either, or the budget would refuse sessions that fit. Negative
     // control: the estimate of half the photon paths falls short of what the full count holds.
     let configs = [
+        TechniqueConfig::Bdpt(relume::technique::bdpt::BdptConfig::default()),
         TechniqueConfig::PhotonReuse(PhotonReuseConfig { paths: 40_000, ..PhotonReuseConfig::default() }),
         TechniqueConfig::InstantCache(InstantCacheConfig::default()),
         TechniqueConfig::InstantCache(InstantCacheConfig { audit: true, vpls: 64, ..InstantCacheConfig::default() }),

@@ -1,6 +1,8 @@
 //! Progressive accumulation: per pixel, the f64 sum of path contributions and the number of
 //! paths, so that techniques that start a variable number of paths per pixel (path regeneration)
-//! stay consistent: the ratio of sums converges to the pixel's expected radiance.
+//! stay consistent: the ratio of sums converges to the pixel's expected radiance. Light-tracing
+//! splats (`bdpt`'s t = 1) land on any pixel, so they sum separately, each pass's splats being
+//! that pass's estimate, and resolve to their average over passes.
 use super::image::LinearImage;
 use crate::core::Rgb;
 use rayon::prelude::*;
@@ -40,11 +42,16 @@ pub struct Film {
     pub accumulation_id: u64,
     /// Render passes accumulated since the last reset.
     pub passes: u32,
+    /// Light-tracing splats: per pixel, the sum over passes of each pass's splatted estimate,
+    /// so the splatted part of a pixel is `splats / passes`. Empty until a technique splats.
+    splats: Vec<[f64; 3]>,
 }
 
 impl Film {
     /// Bytes a film holds per pixel.
     pub const BYTES_PER_PIXEL: u64 = std::mem::size_of::<PixelAccum>() as u64;
+    /// Bytes the splat buffer adds per pixel once a technique splats.
+    pub const SPLAT_BYTES_PER_PIXEL: u64 = std::mem::size_of::<[f64; 3]>() as u64;
 
     pub fn new(width: u32, height: u32) -> Film {
         Film {
@@ -53,12 +60,14 @@ impl Film {
             pixels: vec![PixelAccum::default(); (width * height) as usize],
             accumulation_id: 0,
             passes: 0,
+            splats: Vec::new(),
         }
     }
 
     /// Discards the accumulation (something in the scene changed).
     pub fn reset(&mut self) {
         self.pixels.iter_mut().for_each(|p| *p = PixelAccum::default());
+        self.splats.iter_mut().for_each(|s| *s = [0.0; 3]);
         self.accumulation_id += 1;
         self.passes = 0;
     }
@@ -121,16 +130,42 @@ impl Film {
         &self.pixels
     }
 
+    /// Adds one pass's splats, (pixel index, value), each value already that pass's estimate
+    /// for its pixel. The pass itself is counted by [`Film::accumulate_passes`].
+    pub fn add_splats(&mut self, splats: &[(u32, Rgb)]) {
+        if splats.is_empty() {
+            return;
+        }
+        if self.splats.is_empty() {
+            self.splats = vec![[0.0; 3]; self.pixels.len()];
+        }
+        for &(index, v) in splats {
+            let s = &mut self.splats[index as usize];
+            s[0] += v.r as f64;
+            s[1] += v.g as f64;
+            s[2] += v.b as f64;
+        }
+    }
+
+    /// Bytes the splat buffer holds (0 until a technique splats).
+    pub fn splat_bytes(&self) -> u64 {
+        self.splats.len() as u64 * Film::SPLAT_BYTES_PER_PIXEL
+    }
+
     /// Mean estimates per pixel (`count`-weighted average of what was added).
     pub fn mean_paths_per_pixel(&self) -> f64 {
         self.pixels.iter().map(|p| p.count).sum::<f64>() / self.pixels.len().max(1) as f64
     }
 
+    /// The image: each pixel's mean, plus its splats averaged over the passes.
     pub fn resolve(&self) -> LinearImage {
-        LinearImage {
-            width: self.width,
-            height: self.height,
-            pixels: self.pixels.iter().map(PixelAccum::mean).collect(),
+        let mut pixels: Vec<Rgb> = self.pixels.iter().map(PixelAccum::mean).collect();
+        if !self.splats.is_empty() && self.passes > 0 {
+            let inv = 1.0 / self.passes as f64;
+            for (p, s) in pixels.iter_mut().zip(&self.splats) {
+                *p += Rgb::new((s[0] * inv) as f32, (s[1] * inv) as f32, (s[2] * inv) as f32);
+            }
         }
+        LinearImage { width: self.width, height: self.height, pixels }
     }
 }

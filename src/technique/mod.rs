@@ -202,14 +202,19 @@ impl TechniqueConfig {
     }
 
     /// Resident memory the technique will hold on `scene` at `pixels` pixels, before anything
-    /// is allocated (see `budget.rs`). The film, which every technique has, is not included.
+    /// is allocated (see `budget.rs`). The film, which every technique has, is not included;
+    /// `bdpt`'s splat buffer, which only it adds to the film, is.
     pub fn resident_estimate(
         &self,
         scene: &crate::scene::Scene,
         pixels: u64,
     ) -> Result<MemoryEstimate, TechniqueError> {
         match self {
-            TechniqueConfig::Path(_) | TechniqueConfig::Bdpt(_) => Ok(MemoryEstimate { bytes: 0, field: "id" }),
+            TechniqueConfig::Path(_) => Ok(MemoryEstimate { bytes: 0, field: "id" }),
+            TechniqueConfig::Bdpt(_) => Ok(MemoryEstimate {
+                bytes: pixels.saturating_mul(crate::film::Film::SPLAT_BYTES_PER_PIXEL),
+                field: "id",
+            }),
             TechniqueConfig::PhotonReuse(c) => c.resident_estimate(scene, pixels),
             TechniqueConfig::InstantCache(c) => c.resident_estimate(pixels),
             TechniqueConfig::ParticleGi(c) => c.resident_estimate(scene),

@@ -83,10 +83,11 @@ impl TechniqueConfig {
                 None => "particle_gi".into(),
             },
             TechniqueConfig::Bdpt(c) => format!(
-                "bdpt:spp={}{}{}",
+                "bdpt:spp={}{}{}{}",
                 c.spp,
                 if c.light_per_eye_path { ":light_per_eye_path=true" } else { "" },
-                if c.permute { "" } else { ":permute=false" }
+                if c.permute { "" } else { ":permute=false" },
+                if c.light_tracing_only { ":light_tracing_only=true" } else { "" }
             ),
             TechniqueConfig::PhotonReuse(c) => {
                 let mode = serde_json::to_value(c.reuse).ok().and_then(|v| v.as_str().map(str::to_string));

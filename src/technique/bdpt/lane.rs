@@ -2,7 +2,7 @@
 //! extends the eye subpath by the vertex the packet hit and evaluates every strategy ending
 //! there, (0, t) when it is a light, (1, t) by sampling a light, and (s, t) for s ≥ 2 against
 //! the vertices of one light subpath of the batch, each weighted by the power heuristic.
-use super::vertex::{hit_vertex, material, mis_weight, scatter, Transport, Vertex, VertexKind};
+use super::vertex::{hit_vertex, material, mis_weight, scatter, CameraDensity, Transport, Vertex, VertexKind};
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::{Hit, Ray};
 use crate::scene::{Scene, SceneAccel};
@@ -23,6 +23,8 @@ pub struct BdptContext<'a> {
     /// With one light subpath per eye path: the first pixel of the queue, so that pixel p's own
     /// subpath is `batch[p - first]`. `None`: a shared batch, each eye path's own picked at random.
     pub own_from: Option<usize>,
+    /// The camera's density for the weights against the t = 1 strategies.
+    pub camera: CameraDensity<'a>,
 }
 
 #[derive(Clone)]
@@ -62,20 +64,11 @@ impl LanePath for BdptLane {
         self.rng = rng;
         let j = self.rng.next_2d();
         self.ray = ctx.scene.camera.ray(x as f32 + j.x, y as f32 + j.y);
-        // The camera's own density never enters a weight: strategies with t = 1 are not used.
-        self.pdf_dir = 1.0;
+        // The camera's density of this direction weighs the path against light tracing (t = 1).
+        self.pdf_dir = ctx.camera.pdf_dir(self.ray.dir);
         self.beta = Rgb::WHITE;
         self.eye.clear();
-        self.eye.push(Vertex {
-            kind: VertexKind::Camera,
-            p: self.ray.origin,
-            n: Vec3::ZERO,
-            wo: Vec3::ZERO,
-            beta: Rgb::WHITE,
-            pdf_fwd: 1.0,
-            pdf_rev: 0.0,
-            delta: false,
-        });
+        self.eye.push(ctx.camera.vertex());
         self.radiance = Rgb::BLACK;
         let drawn = (self.rng.next_u32() as usize) % ctx.batch.len().max(1);
         let pixel = y * ctx.scene.camera.width as usize + x;
@@ -120,7 +113,7 @@ impl LanePath for BdptLane {
             let le = scene.lights[l as usize].geometry.emitted(v.n, v.wo);
             if !le.is_black() {
                 self.eye.push(v);
-                self.radiance += self.beta * le * mis_weight(scene, &self.eye, &[]);
+                self.radiance += self.beta * le * mis_weight(scene, &ctx.camera, &self.eye, &[]);
             }
             self.done = true;
             return;
@@ -182,7 +175,7 @@ impl BdptLane {
             pdf_rev: 0.0,
             delta: false,
         };
-        let w = mis_weight(scene, &self.eye, &[sampled]);
+        let w = mis_weight(scene, &ctx.camera, &self.eye, &[sampled]);
         shadows.push(ShadowTest { ray: ne.shadow, lane, contribution: self.beta * ne.contribution * w });
     }
 
@@ -219,7 +212,7 @@ impl BdptLane {
                 continue;
             }
             let g = e.n.dot(dir).abs() * l.n.dot(dir).abs() / dist2;
-            let w = mis_weight(scene, &self.eye, &light_path[..s]);
+            let w = mis_weight(scene, &ctx.camera, &self.eye, &light_path[..s]);
             // Both ends leave their surface on the side they connect from, so a segment between
             // the two sides of one thin wall crosses it and is occluded.
             let from = offset_ray_origin(e.p, if e.n.dot(dir) >= 0.0 { e.n } else { -e.n });

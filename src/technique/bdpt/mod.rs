@@ -9,15 +9,19 @@
 //!    of `light_batch` light subpaths per queue (`vertex.rs`): a light by power, a point and
 //!    direction by its emission distribution, BSDF sampling, Russian roulette, at most l_m
 //!    surface vertices; lights absorb.
-//! 2. Trace eye subpaths W at a time with regeneration, exactly as `path`: a regeneration
+//! 2. Connect every non-specular light subpath vertex to the camera (t = 1, `splat.rs`) and
+//!    splat it, weighted, onto the pixel it projects to; the film averages splats over passes.
+//! 3. Trace eye subpaths W at a time with regeneration, exactly as `path`: a regeneration
 //!    phase refills ended lanes from the queue, a closing phase of at most l_m + 1 steps ends.
-//! 3. At every eye vertex t (`lane.rs`), evaluate the strategies ending there: (0, t) when it
+//! 4. At every eye vertex t (`lane.rs`), evaluate the strategies ending there: (0, t) when it
 //!    is on a light; (1, t), a light sample (next-event estimation); and (s, t) for s ≥ 2, a
 //!    connection to each vertex of one light subpath of the batch. With `permute` (the
 //!    paper's §3.4) that light subpath is picked at random at every bounce instead of being
 //!    the eye path's own, which breaks the correlation between an eye path's connections.
-//! 4. Each strategy is weighted by the power heuristic over all strategies with t ≥ 2 that
-//!    make the same path (`vertex.rs::mis_weight`); specular vertices are never connected.
+//! 5. Each strategy is weighted by the power heuristic over all strategies that make the same
+//!    path (`vertex.rs::mis_weight`), with the camera's density scaled by the light subpaths
+//!    traced per eye sample (the sample counts of Veach §9.2.2); specular vertices are never
+//!    connected, and a light seen directly is left to the eye path (no (1, 1)).
 //!
 //! # Why permutation keeps the estimate unbiased
 //! The light subpaths of a batch are independent and identically distributed. For a fixed eye
@@ -44,36 +48,40 @@
 //! `relume bench error`) one light subpath per eye path lowered relMSE from 0.0605 to 0.0595
 //! at 1.32× the rays and 1.38× the tick, so the batch stays the default.
 //! | `permute` | true | pick a random light subpath at every eye bounce (§3.4) |
+//! | `light_tracing_only` | false | only the t = 1 strategies, unweighted, one light subpath per pixel: light tracing, an independent estimate for checking caustics |
 //!
 //! # Bias and consistency
-//! Biased in two ways. (a) The truncation at l_m surface vertices, as `path`. (b) Strategies
-//! with t = 1 (light subpath vertices connected to the camera and splatted onto the film) are
-//! not built, and nothing else can make a path whose only non-specular connection would be
-//! to the camera: light from a point or spot light through a specular chain onto a diffuse
-//! surface seen by the camera (the caustic of a glass sphere under a point light) is missing,
-//! a bias, not just noise. For every other path the weights are normalised over the strategies
-//! that are used (t ≥ 2), which keeps those unbiased.
+//! Biased only by the truncation at l_m surface vertices, as `path`. The weights sum to 1
+//! over the strategies used for every path, so caustics of point and spot lights seen through
+//! a specular chain (light → glass → diffuse → camera), which only t = 1 can make, are
+//! estimated without bias. `light_tracing_only` splats the light's own vertex too (an area light
+//! seen directly) and is unbiased on its own, up to the same truncation.
 //!
 //! Russian roulette on light subpaths uses the product of BSDF weights since the light, so it
 //! does not depend on the light's power or the scene's units (`vertex.rs::light_subpath`).
 //!
 //! # Failure modes
-//! Without t = 1, caustics of area lights seen directly (light → specular → diffuse → camera)
-//! are found only by eye paths and stay noisy, and those of point and spot lights are missing
-//! (see Bias); a small `light_batch` correlates the noise between pixels.
+//! Caustics seen through a mirror or glass (light → specular → diffuse → specular → camera)
+//! have no connectable strategy at a point light and stay missing, as in every unbiased
+//! tracer without path-space regularisation. Splats land on pixels other than the queue's, so
+//! a pass's splats are gathered and added after it (memory: one f64 RGB per pixel, on first
+//! splat). A small `light_batch` correlates the noise between pixels; with the default batch
+//! of 32 per queue, light tracing has few samples per pixel and the weights lean on eye paths.
 mod lane;
+mod splat;
 mod vertex;
 
-use super::path::packets::trace_chunk;
+use super::path::packets::{trace_chunk, LaneSettings};
 use super::path::{LanePlan, PathConfig, PathStats};
 use super::registry::{Parameter, ParameterKind, TechniqueDescription, SPP};
 use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
-use crate::core::Rng;
-use crate::film::Film;
+use crate::core::{Rgb, Rng};
+use crate::film::{Film, PixelAccum};
 use crate::scene::edits::SceneDelta;
 use crate::scene::Scene;
 use lane::{BdptContext, BdptLane};
 use serde::{Deserialize, Serialize};
+use vertex::CameraDensity;
 
 /// Configuration of the `bdpt` technique. Unknown fields are rejected.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -89,6 +97,8 @@ pub struct BdptConfig {
     /// One light subpath per eye path (the paper's choice) instead of `light_batch` per queue.
     pub light_per_eye_path: bool,
     pub permute: bool,
+    /// Light tracing alone: only the t = 1 strategies, unweighted, one light subpath per pixel.
+    pub light_tracing_only: bool,
 }
 
 impl Default for BdptConfig {
@@ -104,6 +114,7 @@ impl Default for BdptConfig {
             light_batch: 32,
             light_per_eye_path: false,
             permute: true,
+            light_tracing_only: false,
         }
     }
 }
@@ -144,7 +155,13 @@ pub struct BdptStats {
     pub lanes: PathStats,
     pub light_subpaths: u64,
     pub light_subpath_rays: u64,
-    /// Nothing: light subpaths live for one pass.
+    /// Visibility rays from light subpath vertices to the camera (t = 1).
+    #[serde(default)]
+    pub camera_rays: u64,
+    /// Of those, the ones that reached the camera and were splatted.
+    #[serde(default)]
+    pub camera_splats: u64,
+    /// The film's splat buffer; light subpaths live for one pass.
     #[serde(default)]
     pub memory: super::ResidentMemory,
 }
@@ -181,58 +198,116 @@ impl Technique for Bdpt {
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
         let LanePlan { max_path_length: l_m, mean_reflectance: rho, settings, queue } =
             self.config.eye_settings().lane_plan(ctx.scene);
-        let (light_batch, permute) = (self.config.light_batch as u64, self.config.permute);
-        let per_eye_path = self.config.light_per_eye_path;
-        let mut total = film.accumulate_passes(
-            self.config.spp,
-            &mut self.passes,
-            queue as usize,
-            |pass, first, chunk| {
-                // This queue's batch of light subpaths, each from its own stream.
-                let mut light_rays = 0;
-                let batch_size = if per_eye_path { chunk.len() as u64 } else { light_batch };
-                let batch: Vec<_> = (0..batch_size)
-                    .map(|k| {
-                        let stream = (first as u64) << 16 | k;
-                        let mut rng = Rng::for_sample(ctx.seed, ctx.tick, stream, pass ^ LIGHT_STREAM);
-                        let (path, rays) = vertex::light_subpath(ctx.scene, ctx.accel, l_m as usize, &mut rng);
-                        light_rays += rays;
-                        path
-                    })
-                    .collect();
-                let own_from = per_eye_path.then_some(first);
-                let lane_ctx = BdptContext {
-                    scene: ctx.scene,
-                    accel: ctx.accel,
-                    max_path_length: l_m,
-                    batch: &batch,
-                    permute,
-                    own_from,
-                };
-                let lanes = trace_chunk::<BdptLane>(
-                    ctx.scene,
-                    ctx.accel.scene(),
-                    &lane_ctx,
-                    &settings,
-                    (ctx.seed, ctx.tick, pass),
-                    first,
-                    chunk,
-                );
-                BdptStats {
-                    lanes,
-                    light_subpaths: batch.len() as u64,
-                    light_subpath_rays: light_rays,
-                    ..Default::default()
-                }
+        let pixels = film.width as usize * film.height as usize;
+        let one_per_pixel = self.config.light_per_eye_path || self.config.light_tracing_only;
+        let queues = pixels.div_ceil(queue as usize);
+        let light_subpaths = if one_per_pixel { pixels } else { queues * self.config.light_batch as usize };
+        let plan = PassPlan {
+            ctx,
+            config: &self.config,
+            settings,
+            l_m,
+            camera: CameraDensity {
+                camera: &ctx.scene.camera,
+                light_per_eye_sample: light_subpaths as f32 / pixels.max(1) as f32,
             },
-            BdptStats::merge,
-        );
+        };
+        let mut total = BdptStats::default();
+        for _ in 0..self.config.spp {
+            let pass = film.accumulate_passes(
+                1,
+                &mut self.passes,
+                queue as usize,
+                |pass, first, chunk| plan.trace_queue(pass, first, chunk),
+                PassOutput::merge,
+            );
+            film.add_splats(&pass.splats);
+            total = total.merge(pass.stats);
+        }
         total.lanes.max_path_length = l_m;
         total.lanes.queue_pixels = queue;
         total.lanes.mean_reflectance = rho;
+        total.memory.set("splats", film.splat_bytes());
         let mut rays = total.lanes.rays;
         rays.secondary += total.light_subpath_rays;
+        rays.shadow += total.camera_rays;
         Ok(RenderStats { rays, detail: TechniqueStats::Bdpt(Box::new(total)) })
+    }
+}
+
+/// What one pass needs to trace a queue.
+struct PassPlan<'a> {
+    ctx: &'a RenderContext<'a>,
+    config: &'a BdptConfig,
+    settings: LaneSettings,
+    l_m: u32,
+    camera: CameraDensity<'a>,
+}
+
+/// One pass's figures and its splats.
+#[derive(Default)]
+struct PassOutput {
+    stats: BdptStats,
+    splats: Vec<(u32, Rgb)>,
+}
+
+impl PassOutput {
+    fn merge(mut self, mut o: PassOutput) -> PassOutput {
+        if self.splats.len() < o.splats.len() {
+            std::mem::swap(&mut self.splats, &mut o.splats);
+        }
+        self.splats.extend(o.splats);
+        PassOutput { stats: self.stats.merge(o.stats), splats: self.splats }
+    }
+}
+
+impl PassPlan<'_> {
+    /// One queue of one pass: its light subpaths, their splats (t = 1), then its eye paths.
+    fn trace_queue(&self, pass: u64, first: usize, chunk: &mut [PixelAccum]) -> PassOutput {
+        let (ctx, config) = (self.ctx, self.config);
+        let one_per_pixel = config.light_per_eye_path || config.light_tracing_only;
+        let batch_size = if one_per_pixel { chunk.len() as u64 } else { config.light_batch as u64 };
+        let mut light_rays = 0;
+        let batch: Vec<_> = (0..batch_size)
+            .map(|k| {
+                // Each light subpath from its own stream.
+                let stream = (first as u64) << 16 | k;
+                let mut rng = Rng::for_sample(ctx.seed, ctx.tick, stream, pass ^ LIGHT_STREAM);
+                let (path, rays) = vertex::light_subpath(ctx.scene, ctx.accel, self.l_m as usize, &mut rng);
+                light_rays += rays;
+                path
+            })
+            .collect();
+        let weighted = !config.light_tracing_only;
+        let splats = splat::splat_light_subpaths(ctx.scene, ctx.accel, &self.camera, &batch, weighted);
+        let mut stats = BdptStats {
+            light_subpaths: batch.len() as u64,
+            light_subpath_rays: light_rays,
+            camera_rays: splats.rays,
+            camera_splats: splats.splats.len() as u64,
+            ..Default::default()
+        };
+        if weighted {
+            let lane_ctx = BdptContext {
+                scene: ctx.scene,
+                accel: ctx.accel,
+                max_path_length: self.l_m,
+                batch: &batch,
+                permute: config.permute,
+                own_from: config.light_per_eye_path.then_some(first),
+                camera: self.camera,
+            };
+            stats.lanes = trace_chunk::<BdptLane>(
+                ctx.scene,
+                ctx.accel.scene(),
+                &lane_ctx,
+                &self.settings,
+                (ctx.seed, ctx.tick, pass),
+                first,
+                chunk,
+            );
+        }
+        PassOutput { stats, splats: splats.splats }
     }
 }
 
@@ -242,6 +317,8 @@ impl BdptStats {
             lanes: self.lanes.merge(o.lanes),
             light_subpaths: self.light_subpaths + o.light_subpaths,
             light_subpath_rays: self.light_subpath_rays + o.light_subpath_rays,
+            camera_rays: self.camera_rays + o.camera_rays,
+            camera_splats: self.camera_splats + o.camera_splats,
             memory: self.memory,
         }
     }

@@ -7,6 +7,7 @@
 //! (`delta`: it cannot be connected to). Directions point away from the vertex.
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::Ray;
+use crate::scene::camera::Camera;
 use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
 use glam::Vec3;
 
@@ -73,6 +74,46 @@ pub fn pdf_area(scene: &Scene, from: &Vertex, prev: Option<&Vertex>, to: &Vertex
     to_area(pdf_dir, from, to)
 }
 
+/// The pinhole as the t = 1 strategies see it. Per pass, every pixel starts one eye path and
+/// the pass traces `light_per_eye_sample` times as many light subpaths; the power heuristic
+/// compares sample count × density (Veach 1997, §9.2.2), so the camera's direction density
+/// enters every weight divided by that ratio, and the same quantity scales a splat.
+#[derive(Clone, Copy)]
+pub struct CameraDensity<'a> {
+    pub camera: &'a Camera,
+    pub light_per_eye_sample: f32,
+}
+
+impl CameraDensity<'_> {
+    /// The camera's density of the unit direction `dir` (image-wide, see
+    /// [`Camera::pdf_direction`]) divided by the light subpaths per eye sample.
+    pub fn pdf_dir(&self, dir: Vec3) -> f32 {
+        self.camera.pdf_direction(dir.dot(self.camera.forward)) / self.light_per_eye_sample
+    }
+
+    /// [`CameraDensity::pdf_dir`] towards `p`; 0 outside the image.
+    pub fn pdf_dir_to(&self, p: Vec3) -> f32 {
+        match self.camera.raster(p) {
+            Some(_) => self.pdf_dir((p - self.camera.position).normalize()),
+            None => 0.0,
+        }
+    }
+
+    /// The camera's vertex: the pinhole, which is not specular (it can be connected to).
+    pub fn vertex(&self) -> Vertex {
+        Vertex {
+            kind: VertexKind::Camera,
+            p: self.camera.position,
+            n: Vec3::ZERO,
+            wo: Vec3::ZERO,
+            beta: Rgb::WHITE,
+            pdf_fwd: 1.0,
+            pdf_rev: 0.0,
+            delta: false,
+        }
+    }
+}
+
 /// Density per unit area of choosing light vertex `v` as a light subpath's start.
 pub fn pdf_light_origin(scene: &Scene, v: &Vertex) -> f32 {
     let VertexKind::Light(l) = v.kind else { return 0.0 };
@@ -86,38 +127,44 @@ fn is_delta_light(scene: &Scene, v: &Vertex) -> bool {
 
 /// The power-heuristic weight of strategy (s, t) = (`light.len()`, `eye.len()`) for the path the
 /// two subpaths make when connected, among the strategies `bdpt` uses: every (s', t') with
-/// s' + t' = s + t and t' ≥ 2 (no light tracing to the camera; the weights still sum to 1 over
-/// the strategies that can make the path, so the estimate stays unbiased).
-pub fn mis_weight(scene: &Scene, eye: &[Vertex], light: &[Vertex]) -> f32 {
+/// s' + t' = s + t and t' ≥ 1, except (1, 1) (a light seen directly is left to the eye path,
+/// with weight 1). `eye[0]` is the camera's vertex.
+pub fn mis_weight(scene: &Scene, camera: &CameraDensity, eye: &[Vertex], light: &[Vertex]) -> f32 {
     let (s, t) = (light.len(), eye.len());
-    if s + t == 2 || t < 2 {
+    if s + t == 2 {
         return 1.0;
     }
     let remap = |x: f32| if x != 0.0 { x } else { 1.0 };
     // The connection changes the reverse densities of the (up to) four vertices next to it.
     let mut e_last = eye[t - 1];
-    let mut e_prev = eye[t - 2];
+    let mut e_prev = if t >= 2 { Some(eye[t - 2]) } else { None };
     let mut l_last = light.last().copied();
     let mut l_prev = if s >= 2 { Some(light[s - 2]) } else { None };
-    match &l_last {
-        Some(ll) => {
+    match (&l_last, e_prev.as_mut()) {
+        (Some(ll), e_prev) => {
             e_last.pdf_rev = pdf_area(scene, ll, l_prev.as_ref(), &e_last);
-            e_prev.pdf_rev = pdf_area(scene, &e_last, Some(ll), &e_prev);
+            if let Some(ep) = e_prev {
+                ep.pdf_rev = pdf_area(scene, &e_last, Some(ll), ep);
+            }
         }
-        None => {
+        (None, Some(ep)) => {
             e_last.pdf_rev = pdf_light_origin(scene, &e_last);
-            e_prev.pdf_rev = pdf_area(scene, &e_last, None, &e_prev);
+            ep.pdf_rev = pdf_area(scene, &e_last, None, ep);
         }
+        (None, None) => return 1.0,
     }
     if let Some(ll) = l_last.as_mut() {
-        ll.pdf_rev = pdf_area(scene, &e_last, Some(&e_prev), ll);
+        ll.pdf_rev = match &e_prev {
+            Some(ep) => pdf_area(scene, &e_last, Some(ep), ll),
+            None => to_area(camera.pdf_dir_to(ll.p), &e_last, ll),
+        };
     }
     if let (Some(lp), Some(ll)) = (l_prev.as_mut(), l_last.as_ref()) {
         lp.pdf_rev = pdf_area(scene, ll, Some(&e_last), lp);
     }
-    let eye_at = |i: usize| match i {
+    let eye_at = |i: usize| match (i, e_prev) {
         _ if i == t - 1 => e_last,
-        _ if i == t - 2 => e_prev,
+        (_, Some(ep)) if i + 2 == t => ep,
         _ => eye[i],
     };
     let light_at = |i: usize| match (l_last, l_prev) {
@@ -127,7 +174,7 @@ pub fn mis_weight(scene: &Scene, eye: &[Vertex], light: &[Vertex]) -> f32 {
     };
     let mut sum = 0.0f32;
     let mut r = 1.0f32;
-    for i in (2..t).rev() {
+    for i in (1..t).rev() {
         r *= remap(eye_at(i).pdf_rev) / remap(eye_at(i).pdf_fwd);
         if !eye_at(i).delta && !eye_at(i - 1).delta {
             sum += r * r;
