@@ -150,21 +150,11 @@ fn light_subpath_roulette_does_not_depend_on_the_lights_units() {
     assert!((dark_rays / base_rays - 1.0).abs() > tolerance, "{dark_rays} vs {base_rays}");
 }
 
-/// A closed white room with a glass ball under a point light: the ball images the light onto
-/// the floor (a ball lens of radius R and index 1.5 focuses at 1.5R/(2·0.5) = 1.5R from its
-/// centre; with the light 3R above the centre the image falls 3R below it, on the floor).
+/// `scenes/caustic-ball.json` (a glass ball imaging a point light onto the floor) at 32².
 fn caustic_room() -> relume::scene::Scene {
-    scene_from_json(json!({
-        "camera": {"position": [0, 0.55, -0.95], "look_at": [0, 0, 0], "vfov_deg": 50, "resolution": [32, 32]},
-        "materials": {"white": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]},
-                      "glass": {"type": "glass", "ior": 1.5}},
-        "objects": [{"name": "room", "shape": {"type": "box"}, "material": "white",
-                     "transform": {"translation": [0, 1, 0]}},
-                    {"name": "ball", "shape": {"type": "sphere", "segments": 96}, "material": "glass",
-                     "transform": {"translation": [0, 0.9, 0], "scale": [0.3, 0.3, 0.3]}}],
-        "lights": [{"name": "bulb", "emitter": {"type": "point", "intensity": [2, 2, 2]},
-                    "transform": {"translation": [0, 1.8, 0]}}]
-    }))
+    let mut scene = load("caustic-ball.json");
+    scene.set_resolution(32, 32);
+    scene
 }
 
 /// Pixels whose centre ray meets the floor within `radius` of the point under the ball without
@@ -177,11 +167,14 @@ fn caustic_pixels(scene: &relume::scene::Scene, radius: f32) -> Vec<usize> {
         for x in 0..camera.width {
             let ray = camera.ray(x as f32 + 0.5, y as f32 + 0.5);
             let t = -ray.origin.y / ray.dir.y;
+            if t <= 0.0 {
+                continue;
+            }
             let floor = ray.origin + ray.dir * t;
             // Distance from the ball's centre to the ray's line, before the floor.
             let along = (centre - ray.origin).dot(ray.dir).clamp(0.0, t);
             let clear = (ray.origin + ray.dir * along - centre).length() > ball;
-            if t > 0.0 && clear && glam::Vec2::new(floor.x, floor.z).length() < radius {
+            if clear && glam::Vec2::new(floor.x, floor.z).length() < radius {
                 pixels.push((y * camera.width + x) as usize);
             }
         }
