@@ -246,6 +246,45 @@ fn bench_reuse_reports_each_mode_with_the_named_fields() {
 }
 
 #[test]
+fn bench_error_judges_a_caustic_against_bdpt_references() {
+    // Property: `path` cannot render the point light's caustic in caustic-ball, so against a
+    // `--reference bdpt` its image is too dark by the caustic's share, while bdpt's own frames
+    // are not. Negative control: against the default `path` references the same path frames
+    // show no such gap, so the option really changes the reference.
+    let out = out_dir("caustic");
+    let mean_bias = |reference: &str| {
+        let report = out.join(reference);
+        let o = relume()
+            .args(["bench", "error", scene("caustic-ball.json").to_str().unwrap()])
+            .args(["--width", "24", "--height", "24", "--frames", "1", "--ref-spp", "512", "--repeats", "1"])
+            .args(["--threads", "2", "--techniques", "path:spp=64,bdpt:spp=64:light_per_eye_path=true"])
+            .args(["--reference", reference, "--out"])
+            .arg(&report)
+            .arg("--cache")
+            .arg(out.join("cache"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(report.join("results.json")).unwrap()).unwrap();
+        assert_eq!(v["reference"], reference);
+        let bias = |config: &str| {
+            let frame =
+                v["frames"].as_array().unwrap().iter().find(|f| f["config"].as_str().unwrap().starts_with(config));
+            frame.expect("a frame")["error"]["mean_bias"].as_f64().unwrap()
+        };
+        (bias("path"), bias("bdpt"))
+    };
+    let (path_vs_bdpt, bdpt_vs_bdpt) = mean_bias("bdpt");
+    let (path_vs_path, _) = mean_bias("path");
+    eprintln!("mean bias: path {path_vs_bdpt:.3} and bdpt {bdpt_vs_bdpt:.3} against bdpt; path {path_vs_path:.3} against path");
+    let gap = 0.05;
+    assert!(path_vs_bdpt < -gap, "path should miss the caustic: {path_vs_bdpt}");
+    assert!(bdpt_vs_bdpt.abs() < gap, "bdpt against its own reference: {bdpt_vs_bdpt}");
+    assert!(path_vs_path.abs() < gap, "the control: path against path references: {path_vs_path}");
+}
+
+#[test]
 fn bench_error_writes_its_files_and_reuses_cached_references() {
     let out = out_dir("error");
     let cache = out.join("cache");

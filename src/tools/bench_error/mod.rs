@@ -1,6 +1,6 @@
 //! `relume bench error`: speed against error. Each technique configuration runs the same
 //! scene (and animation) with the same seed; every K-th frame is compared with a converged
-//! `path` reference (`reference.rs`) by relMSE, RMSE, PSNR and FLIP (`metrics.rs`). Tick times
+//! `path` reference (`reference.rs`; `--reference bdpt` where `path` misses light) by relMSE, RMSE, PSNR and FLIP (`metrics.rs`). Tick times
 //! are the median of `--repeats` runs. Results go to DIR as CSV, JSON, a Markdown report, plots
 //! (`plots.rs`) and false-colour FLIP maps of each configuration's worst frame (`report.rs`).
 //!
@@ -44,10 +44,14 @@ pub struct ErrorArgs {
     /// Animation frames per second.
     #[arg(long, default_value_t = 30.0)]
     pub fps: f32,
-    /// Samples per pixel of the `path` references. The default keeps the references' own
-    /// relMSE (estimated and reported) one to two orders of magnitude below the errors measured.
+    /// Samples per pixel of the references. The default keeps the references' own relMSE
+    /// (estimated and reported) one to two orders of magnitude below the errors measured.
     #[arg(long, default_value_t = 1024)]
     pub ref_spp: u32,
+    /// Technique of the references: `path`, or `bdpt` for scenes with light `path` cannot
+    /// find (a point light's caustic through glass, as in `scenes/caustic-ball.json`).
+    #[arg(long, default_value = "path", value_parser = ["path", "bdpt"])]
+    pub reference: String,
     /// Runs per configuration; tick times are their median.
     #[arg(long, default_value_t = 3)]
     pub repeats: u32,
@@ -164,6 +168,8 @@ pub struct ErrorReport {
     pub height: u32,
     pub threads: usize,
     pub ref_spp: u32,
+    /// The references' technique.
+    pub reference: String,
     /// Largest estimated relMSE of a reference's own noise.
     pub reference_rel_mse: f64,
     pub summaries: Vec<ConfigSummary>,
@@ -199,7 +205,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
     let mut times: Vec<f32> = measured.iter().map(|&f| time_of(f)).collect();
     times.dedup();
     let refs_bar = progress_bar(times.len() as u64 * (args.ref_spp / 2).max(1) as u64 * 2, "spp")?;
-    refs_bar.set_message("references (path)");
+    refs_bar.set_message(format!("references ({})", args.reference));
     let mut references: Vec<(f32, Reference)> = Vec::new();
     pool.install(|| -> Result<()> {
         for &time in &times {
@@ -211,6 +217,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
                 height: scene.camera.height,
                 spp: args.ref_spp,
                 seed: args.seed,
+                technique: &args.reference,
             };
             let (r, _) = reference::reference(&args.cache, &key, &scene, animation.as_ref(), &device, &refs_bar)?;
             references.push((time, r));
@@ -289,6 +296,7 @@ pub fn run(args: ErrorArgs) -> Result<()> {
         height: scene.camera.height,
         threads,
         ref_spp: args.ref_spp,
+        reference: args.reference.clone(),
         reference_rel_mse,
         summaries,
         frames,

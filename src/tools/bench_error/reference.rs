@@ -1,11 +1,12 @@
-//! Converged `path` references, cached on disk.
+//! Converged `path` (or `bdpt`) references, cached on disk.
 //!
-//! A reference is the average of two independent `path` renders of `spp / 2` samples each, so
+//! A reference is the average of two independent renders of `spp / 2` samples each, so
 //! its own noise can be estimated without a third render: the relMSE between the halves is
 //! about 4× the full reference's (each half has twice its variance, and the difference of two
 //! independent estimates adds them). The report states that estimate next to the errors it
 //! measures. References are EXR files under `--cache`, named by a hash of the scene file, the
-//! animation file, the animation time, the resolution, the sample count and the seed, so a
+//! animation file, the animation time, the resolution, the sample count, the seed and the
+//! technique, so a
 //! second run with the same settings reuses them.
 use super::metrics::compare;
 use crate::embree::Device;
@@ -13,6 +14,7 @@ use crate::engine::Session;
 use crate::film::{write_image, LinearImage};
 use crate::scene::animation::Animation;
 use crate::scene::Scene;
+use crate::technique::bdpt::BdptConfig;
 use crate::technique::path::PathConfig;
 use crate::technique::TechniqueConfig;
 use anyhow::{Context, Result};
@@ -32,6 +34,8 @@ pub struct ReferenceKey<'a> {
     pub height: u32,
     pub spp: u32,
     pub seed: u64,
+    /// `path` or `bdpt`.
+    pub technique: &'a str,
 }
 
 impl ReferenceKey<'_> {
@@ -39,6 +43,10 @@ impl ReferenceKey<'_> {
         let mut h = std::collections::hash_map::DefaultHasher::new();
         (self.scene_file, self.animation_file, self.time.to_bits(), self.width, self.height, self.spp, self.seed)
             .hash(&mut h);
+        // A `path` reference keeps the name it had before `bdpt` references existed.
+        if self.technique != "path" {
+            self.technique.hash(&mut h);
+        }
         format!("ref-{:016x}.exr", h.finish())
     }
 }
@@ -63,17 +71,22 @@ fn read_exr(path: &Path) -> Result<LinearImage> {
     Ok(image.layer_data.channel_data.pixels)
 }
 
-/// Renders `spp` samples of `scene` at `time` of `animation` with `path` and `seed`.
+/// Renders `spp` samples of `scene` at `time` of `animation` with the key's technique and `seed`.
 fn render_half(
     scene: &Scene,
     animation: Option<&Animation>,
-    time: f32,
+    key: &ReferenceKey,
     spp: u32,
     seed: u64,
     device: &Device,
     bar: &ProgressBar,
 ) -> Result<LinearImage> {
-    let config = TechniqueConfig::Path(PathConfig { spp: SPP_PER_TICK.min(spp), ..PathConfig::default() });
+    let per_tick = SPP_PER_TICK.min(spp);
+    let config = match key.technique {
+        "bdpt" => TechniqueConfig::Bdpt(BdptConfig { spp: per_tick, ..BdptConfig::default() }),
+        _ => TechniqueConfig::Path(PathConfig { spp: per_tick, ..PathConfig::default() }),
+    };
+    let time = key.time;
     let mut session = Session::new(scene.clone(), &config, seed, device)?;
     if let Some(a) = animation {
         session.queue_edits(a.edits_at(time))?;
@@ -107,8 +120,8 @@ pub fn reference(
         }
     }
     let half = (key.spp / 2).max(1);
-    let a = render_half(scene, animation, key.time, half, key.seed, device, bar)?;
-    let b = render_half(scene, animation, key.time, half, key.seed ^ 0x9e37_79b9_7f4a_7c15, device, bar)?;
+    let a = render_half(scene, animation, key, half, key.seed, device, bar)?;
+    let b = render_half(scene, animation, key, half, key.seed ^ 0x9e37_79b9_7f4a_7c15, device, bar)?;
     let self_rel_mse = compare(&a, &b).0.rel_mse / 4.0;
     let image = LinearImage { pixels: a.pixels.iter().zip(&b.pixels).map(|(x, y)| (*x + *y) * 0.5).collect(), ..a };
     std::fs::create_dir_all(&dir).with_context(|| format!("creating the reference cache {}", dir.display()))?;

@@ -137,12 +137,13 @@ fn markdown(r: &ErrorReport) -> String {
     let _ = writeln!(md, "# relume bench error: {}\n", r.scene);
     let _ = writeln!(
         md,
-        "{} at {}×{}, {} threads; references: `path` at {} spp, own relMSE ≤ {:.2e} (estimated from \
+        "{} at {}×{}, {} threads; references: `{}` at {} spp, own relMSE ≤ {:.2e} (estimated from \
          two independent halves).\n",
         r.animation.as_deref().unwrap_or("static scene"),
         r.width,
         r.height,
         r.threads,
+        r.reference,
         r.ref_spp,
         r.reference_rel_mse
     );
@@ -186,12 +187,13 @@ pub fn table(r: &ErrorReport) -> String {
 
 pub fn print_table(r: &ErrorReport) {
     println!(
-        "relume bench error: {} ({}), {}x{}, {} threads, references {} spp (own relMSE {:.2e})",
+        "relume bench error: {} ({}), {}x{}, {} threads, references {} {} spp (own relMSE {:.2e})",
         r.scene,
         r.animation.as_deref().unwrap_or("static"),
         r.width,
         r.height,
         r.threads,
+        r.reference,
         r.ref_spp,
         r.reference_rel_mse
     );
