@@ -74,9 +74,20 @@ impl Estimates {
     /// The distinct keys of `keys` (each with what goes with it) that have no cached
     /// estimate, in key order.
     pub fn missing<T>(&self, keys: impl Iterator<Item = (RadianceKey, T)>) -> Vec<(RadianceKey, T)> {
-        let mut missing: Vec<(RadianceKey, T)> = keys.filter(|(k, _)| self.is_valid(*k) == Some(false)).collect();
+        // Dedup by a flag per key, not by sorting every sample's corners: after a light move
+        // every sample misses, and the distinct keys are a small fraction of them.
+        let mut seen: Vec<Vec<bool>> = self.valid.iter().map(|v| vec![false; v.len()]).collect();
+        let mut missing: Vec<(RadianceKey, T)> = keys
+            .filter(|(k, _)| {
+                let (object, i) = key_parts(*k);
+                let first = self.valid.get(object).and_then(|v| v.get(i)) == Some(&false) && !seen[object][i];
+                if first {
+                    seen[object][i] = true;
+                }
+                first
+            })
+            .collect();
         missing.sort_unstable_by_key(|(k, _)| *k);
-        missing.dedup_by_key(|(k, _)| *k);
         missing
     }
 

@@ -108,8 +108,11 @@ struct Geometry {
     scales: Vec<Vec3>,
 }
 
+/// A subtriangle's three radiance particles with a point's barycentric weights.
+type Corners = [(RadianceKey, radiance::Vertex, f32); 3];
+
 /// The radiance particles around a camera sample's diffuse hit, on the side it sees.
-fn sample_corners(tessellation: &Tessellation, s: &Shaded) -> Option<[(RadianceKey, radiance::Vertex, f32); 3]> {
+fn sample_corners(tessellation: &Tessellation, s: &Shaded) -> Option<Corners> {
     let hit = s.sample.hit.as_ref()?;
     let side = u8::from(hit.n.dot(hit.wo) < 0.0);
     tessellation.corners(hit.object, hit.triangle, hit.uv, side)
@@ -117,7 +120,7 @@ fn sample_corners(tessellation: &Tessellation, s: &Shaded) -> Option<[(RadianceK
 
 /// The irradiance at a point of a subtriangle: its corners' cached estimates weighted by
 /// their barycentric weights; `None` while a corner has no estimate.
-fn interpolate(estimates: &Estimates, corners: &[(RadianceKey, radiance::Vertex, f32); 3]) -> Option<Rgb> {
+fn interpolate(estimates: &Estimates, corners: &Corners) -> Option<Rgb> {
     let mut sum = Rgb::BLACK;
     for (k, _, w) in corners {
         sum += estimates.get(*k)? * *w;
@@ -356,24 +359,26 @@ impl ParticleGi {
             return vec![Rgb::BLACK; shaded.len()];
         };
         let t = Instant::now();
-        let corners = |s: &Shaded| sample_corners(&g.tessellation, s);
+        // Each sample's corners, found once: a tick after a light move misses every estimate
+        // and interpolates every sample twice.
+        let corners: Vec<Option<Corners>> = shaded.par_iter().map(|s| sample_corners(&g.tessellation, s)).collect();
         let estimates = &self.estimates;
         let mut indirect: Vec<Option<Rgb>> =
-            shaded.par_iter().map(|s| corners(s).map_or(Some(Rgb::BLACK), |c| interpolate(estimates, &c))).collect();
+            corners.par_iter().map(|c| c.as_ref().map_or(Some(Rgb::BLACK), |c| interpolate(estimates, c))).collect();
         let pending: Vec<usize> = (0..shaded.len()).filter(|&i| indirect[i].is_none()).collect();
         let missing =
-            estimates.missing(pending.iter().filter_map(|&i| corners(&shaded[i])).flatten().map(|(k, v, _)| (k, v)));
+            estimates.missing(pending.iter().filter_map(|&i| corners[i].as_ref()).flatten().map(|&(k, v, _)| (k, v)));
         self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
         if pending.is_empty() {
             return indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect();
         }
         self.estimate_missing(ctx, &missing);
         let t = Instant::now();
-        if let Some(g) = &self.geometry {
-            for i in pending {
-                indirect[i] =
-                    sample_corners(&g.tessellation, &shaded[i]).and_then(|c| interpolate(&self.estimates, &c));
-            }
+        let estimates = &self.estimates;
+        let filled: Vec<Option<Rgb>> =
+            pending.par_iter().map(|&i| corners[i].as_ref().and_then(|c| interpolate(estimates, c))).collect();
+        for (&i, value) in pending.iter().zip(filled) {
+            indirect[i] = value;
         }
         self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
         indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect()
