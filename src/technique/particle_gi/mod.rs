@@ -359,25 +359,27 @@ impl ParticleGi {
             return vec![Rgb::BLACK; shaded.len()];
         };
         let t = Instant::now();
-        // Each sample's corners, found once: a tick after a light move misses every estimate
-        // and interpolates every sample twice.
-        let corners: Vec<Option<Corners>> = shaded.par_iter().map(|s| sample_corners(&g.tessellation, s)).collect();
+        let corners = |s: &Shaded| sample_corners(&g.tessellation, s);
         let estimates = &self.estimates;
         let mut indirect: Vec<Option<Rgb>> =
-            corners.par_iter().map(|c| c.as_ref().map_or(Some(Rgb::BLACK), |c| interpolate(estimates, c))).collect();
+            shaded.par_iter().map(|s| corners(s).map_or(Some(Rgb::BLACK), |c| interpolate(estimates, &c))).collect();
         let pending: Vec<usize> = (0..shaded.len()).filter(|&i| indirect[i].is_none()).collect();
-        let missing =
-            estimates.missing(pending.iter().filter_map(|&i| corners[i].as_ref()).flatten().map(|&(k, v, _)| (k, v)));
-        self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
         if pending.is_empty() {
+            self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
             return indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect();
         }
+        // The pending samples' corners, found once and in parallel: after a light move every
+        // sample is pending.
+        let pending: Vec<(usize, Corners)> =
+            pending.par_iter().filter_map(|&i| corners(&shaded[i]).map(|c| (i, c))).collect();
+        let missing = estimates.missing(pending.iter().flat_map(|(_, c)| c).map(|&(k, v, _)| (k, v)));
+        self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
         self.estimate_missing(ctx, &missing);
         let t = Instant::now();
         let estimates = &self.estimates;
-        let filled: Vec<Option<Rgb>> =
-            pending.par_iter().map(|&i| corners[i].as_ref().and_then(|c| interpolate(estimates, c))).collect();
-        for (&i, value) in pending.iter().zip(filled) {
+        let filled: Vec<(usize, Option<Rgb>)> =
+            pending.par_iter().map(|(i, c)| (*i, interpolate(estimates, c))).collect();
+        for (i, value) in filled {
             indirect[i] = value;
         }
         self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
