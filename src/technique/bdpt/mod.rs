@@ -255,10 +255,9 @@ struct PassOutput {
 }
 
 impl PassOutput {
-    fn merge(mut self, mut o: PassOutput) -> PassOutput {
-        if self.splats.len() < o.splats.len() {
-            std::mem::swap(&mut self.splats, &mut o.splats);
-        }
+    /// Queue order is kept, so every pixel sums its splats in the same order whatever the
+    /// scheduling, and images repeat bit for bit.
+    fn merge(mut self, o: PassOutput) -> PassOutput {
         self.splats.extend(o.splats);
         PassOutput { stats: self.stats.merge(o.stats), splats: self.splats }
     }
