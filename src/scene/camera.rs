@@ -88,15 +88,14 @@ impl Camera {
 mod tests {
     use super::*;
 
+    /// A camera with +Y up.
+    fn camera(position: [f32; 3], look_at: [f32; 3], vfov_deg: f32, resolution: [u32; 2]) -> Camera {
+        Camera::from_desc(&CameraDesc { position, look_at, up: [0.0, 1.0, 0.0], vfov_deg, resolution })
+    }
+
     #[test]
     fn centre_and_corners() {
-        let cam = Camera::from_desc(&CameraDesc {
-            position: [0.0, 0.0, 0.0],
-            look_at: [0.0, 0.0, -1.0],
-            up: [0.0, 1.0, 0.0],
-            vfov_deg: 90.0,
-            resolution: [200, 100],
-        });
+        let cam = camera([0.0, 0.0, 0.0], [0.0, 0.0, -1.0], 90.0, [200, 100]);
         let c = cam.ray(100.0, 50.0);
         assert!((c.dir - Vec3::NEG_Z).length() < 1e-6);
         // Top edge at 45° up; right edge at atan(2) because the image is twice as wide.
@@ -108,13 +107,7 @@ mod tests {
 
     #[test]
     fn raster_inverts_ray() {
-        let cam = Camera::from_desc(&CameraDesc {
-            position: [1.0, 2.0, 3.0],
-            look_at: [0.0, 0.5, -1.0],
-            up: [0.0, 1.0, 0.0],
-            vfov_deg: 50.0,
-            resolution: [64, 48],
-        });
+        let cam = camera([1.0, 2.0, 3.0], [0.0, 0.5, -1.0], 50.0, [64, 48]);
         for (x, y) in [(0.5, 0.5), (10.25, 40.75), (63.5, 1.0), (32.0, 24.0)] {
             let r = cam.ray(x, y);
             let (rx, ry, cos) = cam.raster(r.origin + r.dir * 7.0).unwrap();
@@ -130,13 +123,7 @@ mod tests {
     fn the_direction_density_integrates_to_one_over_the_image() {
         // Monte Carlo over the whole sphere of directions: 4π · E[pdf · inside] = 1, with the
         // image's solid angle found by `raster`, not by the cos³ the density assumes.
-        let cam = Camera::from_desc(&CameraDesc {
-            position: [0.0; 3],
-            look_at: [0.0, 0.0, -1.0],
-            up: [0.0, 1.0, 0.0],
-            vfov_deg: 70.0,
-            resolution: [40, 30],
-        });
+        let cam = camera([0.0; 3], [0.0, 0.0, -1.0], 70.0, [40, 30]);
         let mut rng = crate::core::Rng::new(7, 0);
         let n = 400_000;
         let (mut total, mut one_cosine_short) = (0.0f64, 0.0f64);
