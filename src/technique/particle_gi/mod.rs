@@ -108,6 +108,11 @@ struct Geometry {
     scales: Vec<Vec3>,
 }
 
+/// Pending samples per parallel chunk when gathering missing estimates.
+const PENDING_CHUNK: usize = 1024;
+/// Keys a chunk remembers to drop repeats (a small ring: neighbours share corners).
+const RECENT_KEYS: usize = 16;
+
 /// A subtriangle's three radiance particles with a point's barycentric weights.
 type Corners = [(RadianceKey, radiance::Vertex, f32); 3];
 
@@ -368,18 +373,34 @@ impl ParticleGi {
             self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
             return indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect();
         }
-        // The pending samples' corners, found once and in parallel: after a light move every
-        // sample is pending.
-        let pending: Vec<(usize, Corners)> =
-            pending.par_iter().filter_map(|&i| corners(&shaded[i]).map(|c| (i, c))).collect();
-        let missing = estimates.missing(pending.iter().flat_map(|(_, c)| c).map(|&(k, v, _)| (k, v)));
+        // After a light move every sample is pending: their corners are gathered in parallel,
+        // chunk by chunk, dropping a key just seen (neighbouring samples share corners), and
+        // the chunks' few keys are deduplicated in sample order.
+        let chunks: Vec<Vec<(RadianceKey, radiance::Vertex)>> = pending
+            .par_chunks(PENDING_CHUNK)
+            .map(|chunk| {
+                let mut recent = [RadianceKey::MAX; RECENT_KEYS];
+                let mut out = Vec::new();
+                for (k, v, _) in chunk.iter().filter_map(|&i| corners(&shaded[i])).flatten() {
+                    if !recent.contains(&k) && estimates.get(k).is_none() {
+                        recent[out.len() % RECENT_KEYS] = k;
+                        out.push((k, v));
+                    }
+                }
+                out
+            })
+            .collect();
+        let missing = estimates.missing(chunks.into_iter().flatten());
         self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
         self.estimate_missing(ctx, &missing);
         let t = Instant::now();
+        let Some(g) = self.geometry.as_ref() else { return vec![Rgb::BLACK; shaded.len()] };
         let estimates = &self.estimates;
-        let filled: Vec<(usize, Option<Rgb>)> =
-            pending.par_iter().map(|(i, c)| (*i, interpolate(estimates, c))).collect();
-        for (i, value) in filled {
+        let filled: Vec<Option<Rgb>> = pending
+            .par_iter()
+            .map(|&i| sample_corners(&g.tessellation, &shaded[i]).and_then(|c| interpolate(estimates, &c)))
+            .collect();
+        for (&i, value) in pending.iter().zip(filled) {
             indirect[i] = value;
         }
         self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
