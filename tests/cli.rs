@@ -277,7 +277,9 @@ fn bench_error_judges_a_caustic_against_bdpt_references() {
     };
     let (path_vs_bdpt, bdpt_vs_bdpt) = mean_bias("bdpt");
     let (path_vs_path, _) = mean_bias("path");
-    eprintln!("mean bias: path {path_vs_bdpt:.3} and bdpt {bdpt_vs_bdpt:.3} against bdpt; path {path_vs_path:.3} against path");
+    eprintln!(
+        "mean bias against bdpt: path {path_vs_bdpt:.3}, bdpt {bdpt_vs_bdpt:.3}; against path: {path_vs_path:.3}"
+    );
     let gap = 0.05;
     assert!(path_vs_bdpt < -gap, "path should miss the caustic: {path_vs_bdpt}");
     assert!(bdpt_vs_bdpt.abs() < gap, "bdpt against its own reference: {bdpt_vs_bdpt}");

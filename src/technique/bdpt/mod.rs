@@ -44,7 +44,7 @@
 //! | `light_batch` | 32 | light subpaths traced per packet queue |
 //! | `light_per_eye_path` | false | instead, one light subpath per eye path, its own unless permuting (Veach's and the paper's choice) |
 //! | `permute` | true | pick a random light subpath at every eye bounce (§3.4) |
-//! | `light_tracing_only` | false | only the t = 1 strategies, unweighted, one light subpath per pixel: light tracing, an independent estimate for checking caustics |
+//! | `light_tracing_only` | false | light tracing alone: t = 1 only, unweighted, a light subpath per pixel |
 //!
 //! The shared batch correlates the pixels of a queue and gives light tracing few samples. On
 //! the Cornell box (128², 1–4 spp, `relume bench error`) one light subpath per eye path lowers

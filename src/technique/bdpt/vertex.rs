@@ -231,8 +231,9 @@ pub fn hit_vertex(
 
 /// Traces one light subpath of at most `max_vertices` vertices after the light's: a light by
 /// power, a point and direction by its emission distribution, then BSDF sampling with Russian
-/// roulette by the throughput since the light (scale-free: the light's units do not matter). Lights absorb: a light subpath stops where it meets one. Returns the
-/// vertices and the rays traced.
+/// roulette by the throughput since the light (scale-free: the light's units do not matter).
+/// Lights absorb: a light subpath stops where it meets one. Returns the vertices and the rays
+/// traced.
 pub fn light_subpath(scene: &Scene, accel: &SceneAccel, max_vertices: usize, rng: &mut Rng) -> (Vec<Vertex>, u64) {
     let mut path = Vec::new();
     let Some(select) = &scene.light_selection else { return (path, 0) };

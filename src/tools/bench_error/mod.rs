@@ -1,8 +1,9 @@
 //! `relume bench error`: speed against error. Each technique configuration runs the same
 //! scene (and animation) with the same seed; every K-th frame is compared with a converged
-//! `path` reference (`reference.rs`; `--reference bdpt` where `path` misses light) by relMSE, RMSE, PSNR and FLIP (`metrics.rs`). Tick times
-//! are the median of `--repeats` runs. Results go to DIR as CSV, JSON, a Markdown report, plots
-//! (`plots.rs`) and false-colour FLIP maps of each configuration's worst frame (`report.rs`).
+//! `path` reference (`reference.rs`; `--reference bdpt` where `path` misses light) by relMSE,
+//! RMSE, PSNR and FLIP (`metrics.rs`). Tick times are the median of `--repeats` runs. Results
+//! go to DIR as CSV, JSON, a Markdown report, plots (`plots.rs`) and false-colour FLIP maps of
+//! each configuration's worst frame (`report.rs`).
 //!
 //! A spec with the suffix `+oidn` (or `+oidn=fast|balanced|high`, and `:noaux` for colour
 //! only: `path:spp=1+oidn=fast:noaux`) runs the same technique with
