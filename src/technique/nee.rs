@@ -9,6 +9,14 @@ use glam::Vec3;
 /// Relative shortening of shadow rays so they stop just before the sampled light point.
 pub const SHADOW_EPSILON: f32 = 1e-4;
 
+/// The occlusion ray from `from` to just short of `to` (unit direction, shortened by
+/// [`SHADOW_EPSILON`] of the distance); `None` where the two coincide.
+pub fn shadow_segment(from: Vec3, to: Vec3) -> Option<Ray> {
+    let span = to - from;
+    let length = span.length();
+    (length > 0.0).then(|| Ray { origin: from, dir: span / length, tnear: 0.0, tfar: length * (1.0 - SHADOW_EPSILON) })
+}
+
 /// A light sample waiting for its shadow ray.
 #[derive(Clone, Copy, Debug)]
 pub struct NextEvent {

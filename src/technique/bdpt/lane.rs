@@ -6,7 +6,7 @@ use super::vertex::{hit_vertex, material, mis_weight, scatter, CameraDensity, Tr
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::{Hit, Ray};
 use crate::scene::{Scene, SceneAccel};
-use crate::technique::nee::{sample_next_event, SHADOW_EPSILON};
+use crate::technique::nee::{sample_next_event, shadow_segment};
 use crate::technique::path::packets::{LanePath, ShadowTest};
 use glam::Vec3;
 
@@ -217,12 +217,7 @@ impl BdptLane {
             // the two sides of one thin wall crosses it and is occluded.
             let from = offset_ray_origin(e.p, if e.n.dot(dir) >= 0.0 { e.n } else { -e.n });
             let to = offset_ray_origin(l.p, if l.n.dot(l.wo) >= 0.0 { l.n } else { -l.n });
-            let span = to - from;
-            let length = span.length();
-            if length <= 0.0 {
-                continue;
-            }
-            let ray = Ray { origin: from, dir: span / length, tnear: 0.0, tfar: length * (1.0 - SHADOW_EPSILON) };
+            let Some(ray) = shadow_segment(from, to) else { continue };
             shadows.push(ShadowTest { ray, lane, contribution: self.beta * f * l.beta * (g * w) });
         }
     }

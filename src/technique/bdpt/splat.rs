@@ -21,7 +21,7 @@ use super::vertex::{material, mis_weight, CameraDensity, Vertex, VertexKind};
 use crate::core::{offset_ray_origin, Rgb};
 use crate::embree::Ray;
 use crate::scene::{Scene, SceneAccel};
-use crate::technique::nee::SHADOW_EPSILON;
+use crate::technique::nee::shadow_segment;
 
 /// Occlusion rays per Embree call (its 8-wide packet kernel).
 const PACKET: usize = 8;
@@ -93,9 +93,7 @@ fn connect(scene: &Scene, camera: &CameraDensity, subpath: &[Vertex]) -> Option<
         return None;
     }
     let from = offset_ray_origin(v.p, if v.n.dot(dir) >= 0.0 { v.n } else { -v.n });
-    let span = camera.camera.position - from;
-    let length = span.length();
-    let ray = Ray { origin: from, dir: span / length, tnear: 0.0, tfar: length * (1.0 - SHADOW_EPSILON) };
+    let ray = shadow_segment(from, camera.camera.position)?;
     let pixel = y as u32 * camera.camera.width + x as u32;
     Some(Candidate { pixel, value, ray })
 }

@@ -190,9 +190,8 @@ pub fn ray_origin(x: Vec3, n: Vec3) -> Vec3 {
 /// surface on their lit side, so a ray between the two sides of one thin wall crosses it and
 /// is occluded.
 pub fn visibility_ray(from: Vec3, vpl: &Vpl) -> Ray {
-    let span = vpl.anchor - from;
-    let length = span.length().max(f32::MIN_POSITIVE);
-    Ray { origin: from, dir: span / length, tnear: 0.0, tfar: length * (1.0 - crate::technique::nee::SHADOW_EPSILON) }
+    // A VPL at the record itself: an empty segment, which nothing occludes.
+    crate::technique::nee::shadow_segment(from, vpl.anchor).unwrap_or(Ray::segment(from, Vec3::Z, 0.0))
 }
 
 /// The smoothstep clamp of the bounded geometry term (eq. 3): 0 below `a`, 1 above `b`.
