@@ -1,7 +1,7 @@
 //! `particle_gi`'s configuration (validated as the service receives it) and its per-tick
 //! figures, laid out like Chang et al.'s Tables 1 and 2. Lengths are fractions of the particle
 //! spacing √ΔA unless stated; times in milliseconds; memory in bytes.
-use super::{lighting, particles};
+use super::{grid, lighting, particles};
 use crate::scene::Scene;
 use crate::technique::budget::{product_sum, MemoryEstimate};
 use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription};
@@ -85,13 +85,12 @@ impl ParticleGiConfig {
         })
     }
 
-    /// Resident memory on `scene` (`budget.rs`): the particles `particles` or `particle_area`
-    /// gives there, their area estimation's temporary samples, both link sets (an end and a
-    /// distance per link, plus what tracing them holds while building), the field's direct
-    /// flux and radiance per lighting share, and the estimate cache (about one radiance
-    /// particle per area particle at the default subtriangle edge, both sides, one estimate
-    /// per share and a flag each). Refuses more than
-    /// [`MAX_PARTICLES`] particles, which `particle_area` alone cannot bound.
+    /// Resident memory on `scene` (`budget.rs`): the particles `particles` or `particle_area` gives
+    /// there with their grids (two per object), their area estimation's temporary samples, both link
+    /// sets (an end and a distance per link, plus what tracing them holds while building), the field's
+    /// direct flux and radiance per lighting share, and the estimate cache (about one radiance particle
+    /// per area particle at the default subtriangle edge, both sides, one estimate per share and a flag
+    /// each). Refuses more than [`MAX_PARTICLES`] particles, which `particle_area` alone cannot bound.
     pub fn resident_estimate(&self, scene: &Scene) -> Result<MemoryEstimate, TechniqueError> {
         let field = if self.particle_area.is_some() { "particle_area" } else { "particles" };
         let planned = particles::planned_particles(scene, self.particle_count(scene), self.particle_area);
@@ -107,7 +106,8 @@ impl ParticleGiConfig {
         product_sum(
             field,
             &[
-                (particles, particles::BYTES_PER_PARTICLE),
+                (particles, particles::BYTES_PER_PARTICLE + grid::BYTES_PER_PARTICLE),
+                (2 * scene.objects.len() as u64, grid::BYTES_PER_GRID),
                 (particles / 2, particles::SAMPLING_BYTES_PER_POINT),
                 (particles * links_each, 4 + 2 + 8),
                 (particles * shares, 2 * RGB_BYTES),

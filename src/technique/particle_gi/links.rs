@@ -6,9 +6,9 @@
 //! time and a retrace gives what a full rebuild would. A hit on a light, a miss, or a hit with
 //! no particle nearby ends nowhere ([`NOWHERE`]); a hit on a specular surface ends at
 //! [`NON_DIFFUSE`] (this method carries diffuse transport only). The end particle is the
-//! nearest one on the side of the hit object that the hit triangle turns towards the ray,
-//! never one on another object, so moving one object cannot change where a link to a static
-//! surface ends. Each link also keeps its hit
+//! nearest one of the hit object on the side the hit triangle turns towards the ray (that
+//! side's grid, and a normal facing the ray), never one on another object, so moving one
+//! object cannot change where a link to a static surface ends. Each link also keeps its hit
 //! distance, rounded up to 1/65 534 of the scene diagonal (u16::MAX: none), for the
 //! incremental update's box tests.
 //!
@@ -17,8 +17,11 @@
 //! particle. The gathering set is built so (only particles in a needed estimation list are
 //! ever gathered, so sides never seen cost nothing); the scattering set, which every walk may
 //! reach, is built whole. The links themselves do not depend on when they are traced, so a
-//! lazy set holds what a full one would for every particle it has.
-use super::particles::{AreaParticles, ParticleGrid};
+//! lazy set holds what a full one would for every particle it has. When an object moves, a
+//! lazy set forgets its particles' links ([`LinkSet::forget`]) rather than retracing them: only
+//! those gathered again are traced again.
+use super::grid::ObjectGrids;
+use super::particles::AreaParticles;
 use crate::core::frame::ShadingFrame;
 use crate::core::sampling::cosine_hemisphere;
 use crate::core::{offset_ray_origin, Rng};
@@ -47,9 +50,11 @@ pub struct LinkSet {
     pub n: u32,
     /// Salt of the direction streams, different per set.
     salt: u64,
-    /// Per particle, its slot in `ends` ([`UNBUILT`] if none); per slot, its particle.
+    /// Per particle, its slot in `ends` ([`UNBUILT`] if none); per slot, its particle
+    /// ([`UNBUILT`] if free), and the free slots, which [`LinkSet::ensure`] fills first.
     slot: Vec<u32>,
     owner: Vec<u32>,
+    free: Vec<u32>,
     /// End particle of link k of the particle in slot s at `s · n² + k`.
     ends: Vec<u32>,
     distance: Vec<u16>,
@@ -68,15 +73,16 @@ impl LinkSet {
         (self.n * self.n) as usize
     }
 
-    /// Links built so far.
+    /// Links built and held.
     pub fn len(&self) -> usize {
-        self.ends.len()
+        (self.owner.len() - self.free.len()) * self.per_particle()
     }
 
     /// A set with no links built yet, for `particles` particles.
     pub fn empty(n: u32, salt: u64, diagonal: f32, particles: usize) -> LinkSet {
         let slot = vec![UNBUILT; particles];
-        LinkSet { n, salt, slot, owner: Vec::new(), ends: Vec::new(), distance: Vec::new(), step: diagonal / 65_534.0 }
+        let step = diagonal / 65_534.0;
+        LinkSet { n, salt, slot, owner: Vec::new(), free: Vec::new(), ends: Vec::new(), distance: Vec::new(), step }
     }
 
     /// The end particles of particle `i`'s links (empty if they are not built).
@@ -97,7 +103,7 @@ impl LinkSet {
         scene: &Scene,
         accel: &SceneAccel,
         particles: &AreaParticles,
-        grid: &ParticleGrid,
+        grids: &ObjectGrids,
         wanted: impl Iterator<Item = u32>,
     ) -> u64 {
         let new: Vec<u32> = wanted.filter(|&i| self.slot[i as usize] == UNBUILT).collect();
@@ -105,15 +111,36 @@ impl LinkSet {
         let this = &*self;
         let traced: Vec<Traced> = (0..new.len() * per)
             .into_par_iter()
-            .map(|l| this.trace(scene, accel, particles, grid, new[l / per] as usize, l % per))
+            .map(|l| this.trace(scene, accel, particles, grids, new[l / per] as usize, l % per))
             .collect();
-        for &i in &new {
-            self.slot[i as usize] = self.owner.len() as u32;
-            self.owner.push(i);
+        for (&i, traced) in new.iter().zip(traced.chunks_exact(per)) {
+            let s = match self.free.pop() {
+                Some(s) => s,
+                None => {
+                    self.ends.resize(self.ends.len() + per, NOWHERE);
+                    self.distance.resize(self.distance.len() + per, NO_DISTANCE);
+                    self.owner.push(UNBUILT);
+                    (self.owner.len() - 1) as u32
+                }
+            };
+            (self.slot[i as usize], self.owner[s as usize]) = (s, i);
+            let links = s as usize * per..(s as usize + 1) * per;
+            self.ends[links.clone()].iter_mut().zip(traced).for_each(|(e, t)| *e = t.end);
+            self.distance[links].iter_mut().zip(traced).for_each(|(d, t)| *d = t.distance);
         }
-        self.ends.extend(traced.iter().map(|t| t.end));
-        self.distance.extend(traced.iter().map(|t| t.distance));
         traced.len() as u64
+    }
+
+    /// Forgets the links of the particles with `drop(i)` (their slots are reused), so they are
+    /// traced again only if asked for.
+    pub fn forget(&mut self, drop: impl Fn(u32) -> bool) {
+        for s in 0..self.owner.len() {
+            let i = self.owner[s];
+            if i != UNBUILT && drop(i) {
+                (self.slot[i as usize], self.owner[s]) = (UNBUILT, UNBUILT);
+                self.free.push(s as u32);
+            }
+        }
     }
 
     /// Unit world direction of link `k` of particle `i`, whose normal's frame is `frame`.
@@ -135,7 +162,7 @@ impl LinkSet {
         scene: &Scene,
         accel: &SceneAccel,
         particles: &AreaParticles,
-        grid: &ParticleGrid,
+        grids: &ObjectGrids,
         i: usize,
         k: usize,
     ) -> Traced {
@@ -149,11 +176,11 @@ impl LinkSet {
                 } else {
                     // The side hit: the triangle's normal turned towards the ray's origin.
                     let n = scene.surface_point(SurfaceId::Object(object), triangle, hit.u, hit.v).n;
-                    let facing = if n.dot(ray.dir) < 0.0 { n } else { -n };
-                    grid.nearest(particles, ray.at(hit.t), NEAREST_RINGS, |j| {
-                        particles.object[j] == object && particles.normal[j].dot(facing) > 0.0
-                    })
-                    .unwrap_or(NOWHERE)
+                    let (side, facing) = if n.dot(ray.dir) < 0.0 { (0, n) } else { (1, -n) };
+                    grids
+                        .side(object as usize, side)
+                        .nearest(particles, ray.at(hit.t), NEAREST_RINGS, |j| particles.normal[j].dot(facing) > 0.0)
+                        .unwrap_or(NOWHERE)
                 }
             }
             _ => NOWHERE,
@@ -172,7 +199,7 @@ impl LinkSet {
         scene: &Scene,
         accel: &SceneAccel,
         particles: &AreaParticles,
-        grid: &ParticleGrid,
+        grids: &ObjectGrids,
         moved: &[bool],
         boxes: &[Aabb],
         tree: &BoxTree,
@@ -186,6 +213,9 @@ impl LinkSet {
             .map(|s| {
                 let i = this.owner[s] as usize;
                 let links = s * per..(s + 1) * per;
+                if i == UNBUILT as usize {
+                    return (Vec::new(), 0);
+                }
                 if on_moved(i as u32) {
                     return (links.collect(), 0);
                 }
@@ -229,7 +259,7 @@ impl LinkSet {
         let stale: Vec<usize> = checked.into_iter().flat_map(|c| c.0).collect();
         let retraced: Vec<(usize, Traced)> = stale
             .par_iter()
-            .map(|&l| (l, this.trace(scene, accel, particles, grid, this.owner[l / per] as usize, l % per)))
+            .map(|&l| (l, this.trace(scene, accel, particles, grids, this.owner[l / per] as usize, l % per)))
             .collect();
         for (l, t) in &retraced {
             self.ends[*l] = t.end;
@@ -239,6 +269,6 @@ impl LinkSet {
     }
 
     pub fn memory_bytes(&self) -> u64 {
-        (self.ends.len() * 6 + (self.slot.len() + self.owner.len()) * 4) as u64
+        (self.ends.len() * 6 + (self.slot.len() + self.owner.len() + self.free.len()) * 4) as u64
     }
 }

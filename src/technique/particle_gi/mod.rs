@@ -6,15 +6,17 @@
 //! # Algorithm
 //! 1. Geometry stage (§4.1; when geometry changes): area particles over the diffuse surfaces
 //!    (`particles.rs`, §3.1), n_s × n_s scattering links traced with Embree (`links.rs`);
-//!    gathering links are traced lazily, the first time a particle is gathered, so surfaces
-//!    never seen cost none (beyond the paper, which built all up front); and the implicit
-//!    radiance particles of the tessellated triangles (`radiance.rs`, §3.2). When objects move, only links that may have changed are retraced
-//!    (beyond the paper, which rebuilt all links in seconds): those of particles on a moved
-//!    object (carried by its transform, not resampled), those ending on one, and those whose
-//!    segment touches a moved surface's old or new bounds. Estimation lists near moved objects
-//!    are dropped. A change of scale keeps every object's point count while each stays within
-//!    a factor 2 of its area's share (`particles::Layout`): the object's particles keep their
-//!    indices and get new areas, and it alone is re-tessellated; otherwise all is resampled.
+//!    gathering links are traced lazily, the first time a particle is gathered, so surfaces never
+//!    seen cost none (beyond the paper, which built all up front); and the implicit radiance
+//!    particles of the tessellated triangles (`radiance.rs`, §3.2). When objects move, only links
+//!    that may have changed are retraced (beyond the paper, which rebuilt all links in seconds):
+//!    those of particles on a moved object (carried by its transform, not resampled; their
+//!    gathering links are forgotten and traced again when next gathered), those ending on one, and
+//!    those whose segment touches a moved surface's old or new bounds; only the moved objects'
+//!    lookup grids are rebuilt. Estimation lists near moved objects are dropped. A change of scale
+//!    keeps every object's point count while each stays within a factor 2 of its area's share
+//!    (`particles::Layout`): the object's particles keep their indices and get new areas, and it
+//!    alone is re-tessellated; otherwise all is resampled.
 //! 2. Lighting stage (§4.2; when lights, materials or geometry change, `lighting.rs`):
 //!    emission to the particles, the first bounce through all scattering links, n_b more
 //!    bounces through one random link each, and L = ρ/π · φ/ΔA. Beyond the paper, the field
@@ -54,12 +56,14 @@
 //! light uses its centre's distance. Direct light is exact (shadow rays).
 //!
 //! # Failure modes
-//! Thin features below the particle spacing get their neighbours' light; light leaks through
-//! walls thinner than R only if their sides' normals agree (they do not for a two-sided
-//! wall); a scene made mostly of mirrors gets no indirect light.
+//! Thin features below the particle spacing get their neighbours' light; link ends and lists
+//! keep to one object and one side of its winding, so a mesh wound inconsistently loses
+//! neighbours at its seams (and could leak through a wall thinner than R there, where a
+//! consistently wound one cannot); a scene made mostly of mirrors gets no indirect light.
 mod config;
 pub use config::DESCRIPTION;
 mod gather;
+mod grid;
 mod lighting;
 mod links;
 mod particles;
@@ -77,9 +81,10 @@ use crate::scene::{Scene, SurfaceId};
 use crate::technique::box_tree::{widened, BoxTree, BOX_SLACK};
 use gather::Estimates;
 use glam::Vec3;
+use grid::ObjectGrids;
 use lighting::{Inputs, Lighting, LightingWork};
 use links::LinkSet;
-use particles::{AreaParticles, Layout, ParticleGrid};
+use particles::{AreaParticles, Layout};
 use radiance::{EstimationLists, RadianceKey, Tessellation};
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -96,7 +101,8 @@ const GATHER_SALT: u64 = 0x4741_5448_4552_0000;
 /// Everything the geometry stage builds.
 struct Geometry {
     particles: AreaParticles,
-    grid: ParticleGrid,
+    /// Nearest-particle grids per object and side.
+    grids: ObjectGrids,
     scatter: LinkSet,
     gather: LinkSet,
     tessellation: Tessellation,
@@ -194,17 +200,18 @@ impl ParticleGi {
         let particles = AreaParticles::sample(ctx.scene, &layout, c.seed);
         self.layout = Some(layout);
         let spacing = particles.area.max(f32::MIN_POSITIVE).sqrt();
-        let grid = ParticleGrid::build(&particles, GRID_CELL * spacing);
+        let grids = ObjectGrids::build(&particles, ctx.scene.objects.len(), GRID_CELL * spacing);
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
         let mut scatter = LinkSet::empty(c.scatter_links, c.seed ^ SCATTER_SALT, diagonal, particles.len());
-        self.pending.links_traced += scatter.ensure(ctx.scene, ctx.accel, &particles, &grid, 0..particles.len() as u32);
+        self.pending.links_traced +=
+            scatter.ensure(ctx.scene, ctx.accel, &particles, &grids, 0..particles.len() as u32);
         // Gathering links are traced when a particle is first gathered (`estimate_missing`).
         let gather = LinkSet::empty(c.gather_links, c.seed ^ GATHER_SALT, diagonal, particles.len());
         let tessellation = Tessellation::build(ctx.scene, c.subtriangle_edge * spacing);
         self.estimates = Estimates::new(&tessellation, lighting::share_count(ctx.scene.lights.len()));
         self.geometry = Some(Geometry {
             particles,
-            grid,
+            grids,
             scatter,
             gather,
             tessellation,
@@ -239,13 +246,17 @@ impl ParticleGi {
             // Particles are grouped by object; re-place the span, which covers every carried one.
             g.particles.place(ctx.scene, first..last + 1);
         }
-        g.grid = ParticleGrid::build(&g.particles, GRID_CELL * g.spacing);
+        for object in (0..moved.len()).filter(|&o| moved[o]) {
+            g.grids.rebuild(&g.particles, object);
+        }
         let slack = BOX_SLACK * g.diagonal;
         let boxes: Vec<Aabb> =
             delta.moved.iter().flat_map(|m| [m.old_bounds, m.new_bounds]).map(|b| widened(&b, slack)).collect();
         let tree = BoxTree::new(boxes.clone());
+        // A moved particle's gathering links are traced again only if it is gathered again.
+        g.gather.forget(|i| moved[g.particles.object[i as usize] as usize]);
         for set in [&mut g.scatter, &mut g.gather] {
-            let (traced, tests) = set.update(ctx.scene, ctx.accel, &g.particles, &g.grid, &moved, &boxes, &tree);
+            let (traced, tests) = set.update(ctx.scene, ctx.accel, &g.particles, &g.grids, &moved, &boxes, &tree);
             self.pending.links_traced += traced;
             self.pending.link_box_tests += tests;
         }
@@ -416,13 +427,13 @@ impl ParticleGi {
         let built: Vec<(RadianceKey, radiance::EstimationList)> = missing
             .par_iter()
             .filter(|(k, _)| !g.lists.lists.contains_key(k))
-            .map(|(k, v)| (*k, EstimationLists::build(ctx.scene, &g.particles, &g.grid, v, radius, cosine)))
+            .map(|(k, v)| (*k, EstimationLists::build(ctx.scene, &g.particles, &g.grids, v, radius, cosine)))
             .collect();
         self.pending.lists_built += built.len() as u64;
         g.lists.lists.extend(built);
         let keys: Vec<RadianceKey> = missing.iter().map(|(k, _)| *k).collect();
         let wanted = gather::particles_to_gather(&g.lists, &keys, g.particles.len());
-        let lazily = g.gather.ensure(ctx.scene, ctx.accel, &g.particles, &g.grid, wanted.iter().copied());
+        let lazily = g.gather.ensure(ctx.scene, ctx.accel, &g.particles, &g.grids, wanted.iter().copied());
         self.pending.links_traced += lazily;
         self.pending.links_built_lazily += lazily;
         self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
@@ -549,7 +560,7 @@ impl Technique for ParticleGi {
             memory.set("scatter_links", g.scatter.memory_bytes());
             memory.set("gather_links", g.gather.memory_bytes());
             memory.set("lists", g.lists.memory_bytes());
-            memory.set("grid", g.grid.memory_bytes());
+            memory.set("grid", g.grids.memory_bytes());
             memory.set("estimates", self.estimates.memory_bytes());
             memory.set("field", self.lighting.as_ref().map_or(0, Lighting::memory_bytes));
         }

@@ -1,5 +1,5 @@
 //! Area particles (Chang et al. §3.1): points spread uniformly over the diffuse surfaces, each
-//! standing for an area ΔA around it, and the grid that finds the particle nearest a hit.
+//! standing for an area ΔA around it.
 //!
 //! Sampling is in object space: a particle is (object, triangle, barycentrics), fixed by the
 //! seed and the object's index, and its world position is recomputed from the object's current
@@ -17,6 +17,7 @@
 //! in object space, so a moved object's particles and areas are the same wherever it is
 //! (exact for uniform scale; a non-uniformly scaled object gets object-space cells).
 //! Units: metres, m².
+use super::grid::ParticleGrid;
 use crate::core::{Rgb, Rng};
 use crate::scene::{Scene, SceneObject, SurfaceId};
 use glam::{Vec2, Vec3};
@@ -161,13 +162,17 @@ impl AreaParticles {
     /// After `object`'s scale changed (its layout holding): the same points, re-placed, with
     /// their areas rescaled to its new area, as a rebuild would make them.
     pub fn rescale_object(&mut self, scene: &Scene, object: usize) {
-        let Some(first) = self.object.iter().position(|&o| o as usize == object) else { return };
-        let end = first + self.object[first..].iter().take_while(|&&o| o as usize == object).count();
+        let range = self.range_of(object);
         let world_area = scaled_area(scene, object);
-        for i in first..end {
+        for i in range.clone() {
             self.areas[i] = (self.cell[i] * world_area) as f32;
         }
-        self.place(scene, first..end);
+        self.place(scene, range);
+    }
+
+    /// The indices of `object`'s particles (they are grouped by object, in object order).
+    pub fn range_of(&self, object: usize) -> std::ops::Range<usize> {
+        self.object.partition_point(|&o| (o as usize) < object)..self.object.partition_point(|&o| o as usize <= object)
     }
 
     /// `n` stratified points on `object`, picked by area along its triangles, with their cell
@@ -185,7 +190,8 @@ impl AreaParticles {
             ..AreaParticles::default()
         };
         let object_area: f32 = object_triangle_areas(o).iter().sum::<f64>() as f32;
-        let grid = ParticleGrid::build(&local, 2.0 * (object_area / n as f32).sqrt().max(f32::MIN_POSITIVE));
+        let members: Vec<u32> = (0..points.len() as u32).collect();
+        let grid = ParticleGrid::build(&local, &members, 2.0 * (object_area / n as f32).sqrt().max(f32::MIN_POSITIVE));
         let mut caught = vec![1u64; points.len()];
         let samples = stratified_points(o, n * AREA_SAMPLES, &mut rng);
         for &(t, b) in &samples {
@@ -305,126 +311,6 @@ fn stratified_points(o: &SceneObject, n: u64, rng: &mut Rng) -> Vec<(u32, Vec2)>
 pub fn pose(scene: &Scene, object: u32, triangle: u32, b: Vec2) -> (Vec3, Vec3) {
     let sp = scene.surface_point(SurfaceId::Object(object), triangle, b.x, b.y);
     (sp.p, sp.n)
-}
-
-/// A hash grid over particle positions for nearest-particle queries.
-#[derive(Clone, Debug, Default)]
-pub struct ParticleGrid {
-    cell: f32,
-    /// Particle indices sorted by cell slot, and where each slot's run starts.
-    starts: Vec<u32>,
-    indices: Vec<u32>,
-}
-
-fn cell_of(p: Vec3, cell: f32) -> [i32; 3] {
-    let c = (p / cell).floor();
-    [c.x as i32, c.y as i32, c.z as i32]
-}
-
-impl ParticleGrid {
-    /// A grid of cells `cell` metres wide over `particles`.
-    pub fn build(particles: &AreaParticles, cell: f32) -> ParticleGrid {
-        let slots = (particles.len().max(1) * 2).next_power_of_two();
-        let slot_of = |i: usize| slot(cell_of(particles.position[i], cell), slots);
-        let mut starts = vec![0u32; slots + 1];
-        for i in 0..particles.len() {
-            starts[slot_of(i) + 1] += 1;
-        }
-        for s in 0..slots {
-            starts[s + 1] += starts[s];
-        }
-        let mut fill = starts.clone();
-        let mut indices = vec![0u32; particles.len()];
-        for i in 0..particles.len() {
-            let s = slot_of(i);
-            indices[fill[s] as usize] = i as u32;
-            fill[s] += 1;
-        }
-        ParticleGrid { cell, starts, indices }
-    }
-
-    /// The particle nearest `p` among those with `accept(i)`, searched in growing shells of
-    /// cells up to `max_rings`; ties go to the lower index, so the answer depends only on the
-    /// accepted particles' positions.
-    pub fn nearest(
-        &self,
-        particles: &AreaParticles,
-        p: Vec3,
-        max_rings: i32,
-        accept: impl Fn(usize) -> bool,
-    ) -> Option<u32> {
-        if self.indices.is_empty() {
-            return None;
-        }
-        let slots = self.starts.len() - 1;
-        let c = cell_of(p, self.cell);
-        let mut best: Option<(f32, u32)> = None;
-        for ring in 0..=max_rings {
-            for dx in -ring..=ring {
-                for dy in -ring..=ring {
-                    for dz in -ring..=ring {
-                        if dx.abs().max(dy.abs()).max(dz.abs()) != ring {
-                            continue;
-                        }
-                        // Skip cells farther than the best so far.
-                        let cell = [c[0] + dx, c[1] + dy, c[2] + dz];
-                        let lo = Vec3::new(cell[0] as f32, cell[1] as f32, cell[2] as f32) * self.cell;
-                        let gap = (lo - p).max(p - lo - Vec3::splat(self.cell)).max(Vec3::ZERO).length_squared();
-                        if best.is_some_and(|(d, _)| gap > d) {
-                            continue;
-                        }
-                        let s = slot(cell, slots);
-                        for &i in &self.indices[self.starts[s] as usize..self.starts[s + 1] as usize] {
-                            if !accept(i as usize) {
-                                continue;
-                            }
-                            let d = (particles.position[i as usize] - p).length_squared();
-                            if best.is_none_or(|(bd, bi)| d < bd || (d == bd && i < bi)) {
-                                best = Some((d, i));
-                            }
-                        }
-                    }
-                }
-            }
-            // Everything closer to p than the searched block's nearest face has been seen.
-            let lo = (Vec3::new(c[0] as f32, c[1] as f32, c[2] as f32) - Vec3::splat(ring as f32)) * self.cell;
-            let hi = lo + Vec3::splat((2 * ring + 1) as f32 * self.cell);
-            let seen = (p - lo).min(hi - p).min_element();
-            if best.is_some_and(|(d, _)| d <= seen * seen) {
-                break;
-            }
-        }
-        best.map(|(_, i)| i)
-    }
-
-    /// Calls `f` with every particle within `r` of `p` (a superset: the caller tests).
-    pub fn within(&self, p: Vec3, r: f32, mut f: impl FnMut(u32)) {
-        if self.indices.is_empty() {
-            return;
-        }
-        let slots = self.starts.len() - 1;
-        let (lo, hi) = (cell_of(p - Vec3::splat(r), self.cell), cell_of(p + Vec3::splat(r), self.cell));
-        for x in lo[0]..=hi[0] {
-            for y in lo[1]..=hi[1] {
-                for z in lo[2]..=hi[2] {
-                    let s = slot([x, y, z], slots);
-                    self.indices[self.starts[s] as usize..self.starts[s + 1] as usize].iter().for_each(|&i| f(i));
-                }
-            }
-        }
-    }
-
-    pub fn memory_bytes(&self) -> u64 {
-        ((self.starts.len() + self.indices.len()) * 4) as u64
-    }
-}
-
-/// Hash slot of a cell (Teschner et al.'s spatial hash).
-fn slot(c: [i32; 3], slots: usize) -> usize {
-    let h = (c[0] as u32).wrapping_mul(73_856_093)
-        ^ (c[1] as u32).wrapping_mul(19_349_663)
-        ^ (c[2] as u32).wrapping_mul(83_492_791);
-    h as usize & (slots - 1)
 }
 
 #[cfg(test)]

@@ -7,14 +7,17 @@
 //! of its subtriangle linearly. Each vertex has one particle per side, as area particles do.
 //!
 //! Estimation lists hold the area particles within radius R of a radiance particle whose
-//! normals are within the cosine threshold, on the radiance particle's own object: the rule
-//! link ends follow, so light never crosses a contact (a box standing on a lit floor keeps a
-//! dark inside and underside, though the floor's particles lie within R of its bottom and
-//! face the same way as its inner side). Beyond the paper, they are built only for radiance
+//! normals are within the cosine threshold, on the radiance particle's own object and side
+//! (of the triangles' winding): the rule link ends follow, so light never crosses a contact
+//! (a box standing on a lit floor keeps a dark inside and underside, though the floor's
+//! particles lie within R of its bottom and face the same way as its inner side), nor a
+//! closed object's wall thinner than R (its inner side's particles face the way the outer
+//! side's do across the wall). Beyond the paper, they are built only for radiance
 //! particles a camera sample actually needs, cached across ticks, and dropped near objects that
 //! move. A list that would be empty falls back to the nearest particle on the same side of the
 //! same object, so every shading point gets an estimate.
-use super::particles::{pose, AreaParticles, ParticleGrid};
+use super::grid::ObjectGrids;
+use super::particles::{pose, AreaParticles};
 use crate::scene::edits::Aabb;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
@@ -144,12 +147,10 @@ pub struct EstimationList {
     pub particles: Vec<u32>,
 }
 
-/// Whether area particle `k` belongs in the list of a radiance particle of `object` at `q`
-/// with normal `n`.
-fn admitted(particles: &AreaParticles, k: usize, object: u32, q: Vec3, n: Vec3, radius: f32, min_cosine: f32) -> bool {
-    particles.object[k] == object
-        && (particles.position[k] - q).length_squared() <= radius * radius
-        && particles.normal[k].dot(n) >= min_cosine
+/// Whether area particle `k`, of the radiance particle's object and side, belongs in the list
+/// of a radiance particle at `q` with normal `n`.
+fn admitted(particles: &AreaParticles, k: usize, q: Vec3, n: Vec3, radius: f32, min_cosine: f32) -> bool {
+    (particles.position[k] - q).length_squared() <= radius * radius && particles.normal[k].dot(n) >= min_cosine
 }
 
 /// Estimation lists of the radiance particles needed so far.
@@ -159,29 +160,28 @@ pub struct EstimationLists {
 }
 
 impl EstimationLists {
-    /// Builds the list of radiance particle `v`: area particles of `v`'s object within
+    /// Builds the list of radiance particle `v`: area particles of `v`'s object and side within
     /// `radius` whose normal has a cosine of at least `min_cosine` with `v`'s, in index order.
     pub fn build(
         scene: &Scene,
         particles: &AreaParticles,
-        grid: &ParticleGrid,
+        grids: &ObjectGrids,
         v: &Vertex,
         radius: f32,
         min_cosine: f32,
     ) -> EstimationList {
         let (q, n) = v.pose(scene);
+        let grid = grids.side(v.object as usize, v.side as usize);
         let mut found = Vec::new();
         grid.within(q, radius, |i| {
-            let k = i as usize;
-            if admitted(particles, k, v.object, q, n, radius, min_cosine) {
+            if admitted(particles, i as usize, q, n, radius, min_cosine) {
                 found.push(i);
             }
         });
         found.sort_unstable();
         found.dedup();
         if found.is_empty() {
-            let same_side = |k: usize| particles.object[k] == v.object && particles.normal[k].dot(n) > 0.0;
-            found.extend(grid.nearest(particles, q, 8, same_side));
+            found.extend(grid.nearest(particles, q, 8, |k| particles.normal[k].dot(n) > 0.0));
         }
         EstimationList { position: q, object: v.object, particles: found }
     }
@@ -247,11 +247,11 @@ mod tests {
         Scene::from_desc(desc, &dir, &dir).expect("scene")
     }
 
-    /// The scene's particles (6 000), grid and tessellation, with the default radius and cosine.
+    /// The scene's particles (6 000), grids and tessellation, with the default radius and cosine.
     struct Fixture {
         scene: Scene,
         particles: AreaParticles,
-        grid: ParticleGrid,
+        grids: ObjectGrids,
         tessellation: Tessellation,
         radius: f32,
         cosine: f32,
@@ -261,14 +261,14 @@ mod tests {
         let scene = scene();
         let particles = AreaParticles::sample(&scene, &Layout::plan(&scene, 6000, None), 3);
         let spacing = particles.area.sqrt();
-        let grid = ParticleGrid::build(&particles, spacing);
+        let grids = ObjectGrids::build(&particles, scene.objects.len(), spacing);
         let tessellation = Tessellation::build(&scene, 1.5 * spacing);
-        Fixture { scene, particles, grid, tessellation, radius: 2.0 * spacing, cosine: 0.9 }
+        Fixture { scene, particles, grids, tessellation, radius: 2.0 * spacing, cosine: 0.9 }
     }
 
     #[test]
     fn estimation_lists_hold_exactly_the_near_particles_with_similar_normals() {
-        let Fixture { scene, particles, grid, tessellation, radius, cosine } = fixture();
+        let Fixture { scene, particles, grids, tessellation, radius, cosine } = fixture();
         let mut checked = 0;
         for object in 0..2u32 {
             for triangle in 0..2u32 {
@@ -276,12 +276,13 @@ mod tests {
                     for side in 0..2u8 {
                         let corners = tessellation.corners(object, triangle, Vec2::new(u, v), side).expect("corners");
                         for (_, vertex, _) in corners {
-                            let list = EstimationLists::build(&scene, &particles, &grid, &vertex, radius, cosine);
+                            let list = EstimationLists::build(&scene, &particles, &grids, &vertex, radius, cosine);
                             let (q, n) = vertex.pose(&scene);
                             let brute: Vec<u32> = (0..particles.len() as u32)
                                 .filter(|&i| {
                                     let k = i as usize;
                                     particles.object[k] == object
+                                        && k % 2 == side as usize
                                         && (particles.position[k] - q).length_squared() <= radius * radius
                                         && particles.normal[k].dot(n) >= cosine
                                 })
@@ -290,7 +291,8 @@ mod tests {
                                 // The fallback: one particle, on the same side of the same object.
                                 assert_eq!(list.particles.len(), 1);
                                 let k = list.particles[0] as usize;
-                                assert!(particles.object[k] == object && particles.normal[k].dot(n) > 0.0);
+                                assert!(particles.object[k] == object && k % 2 == side as usize);
+                                assert!(particles.normal[k].dot(n) > 0.0);
                             } else {
                                 assert_eq!(list.particles, brute, "object {object} triangle {triangle} side {side}");
                                 checked += 1;
@@ -309,7 +311,7 @@ mod tests {
         // box's bottom rests on the floor, so radiance particles on its inner side (facing up)
         // have floor particles, facing up too, within R. Without the object rule they would
         // join the list; with it none does.
-        let Fixture { scene, particles, grid, tessellation, radius, cosine } = fixture();
+        let Fixture { scene, particles, grids, tessellation, radius, cosine } = fixture();
         let (mut bottoms, mut reachable) = (0, 0);
         for triangle in 0..scene.objects[1].mesh.triangles.len() as u32 {
             for side in 0..2u8 {
@@ -320,9 +322,9 @@ mod tests {
                         continue;
                     }
                     bottoms += 1;
-                    reachable +=
-                        (0..particles.len()).filter(|&k| admitted(&particles, k, 0, q, n, radius, cosine)).count();
-                    let list = EstimationLists::build(&scene, &particles, &grid, &vertex, radius, cosine);
+                    let floor = particles.range_of(0);
+                    reachable += floor.filter(|&k| admitted(&particles, k, q, n, radius, cosine)).count();
+                    let list = EstimationLists::build(&scene, &particles, &grids, &vertex, radius, cosine);
                     assert!(list.particles.iter().all(|&k| particles.object[k as usize] == 1), "{:?}", list.particles);
                 }
             }
