@@ -89,7 +89,7 @@ impl ParticleGiConfig {
     /// there with their grids (two per object), their area estimation's temporary samples, both link
     /// sets (an end and a distance per link, plus what tracing them holds while building), the field's
     /// direct flux and radiance per lighting share, and the estimate cache (about one radiance particle
-    /// per area particle at the default subtriangle edge, both sides, one estimate per share and a flag
+    /// per area particle at the default subtriangle edge, both sides, one estimate per share and two flags
     /// each). Refuses more than [`MAX_PARTICLES`] particles, which `particle_area` alone cannot bound.
     pub fn resident_estimate(&self, scene: &Scene) -> Result<MemoryEstimate, TechniqueError> {
         let field = if self.particle_area.is_some() { "particle_area" } else { "particles" };
@@ -111,7 +111,7 @@ impl ParticleGiConfig {
                 (particles / 2, particles::SAMPLING_BYTES_PER_POINT),
                 (particles * links_each, 4 + 2 + 8),
                 (particles * shares, 2 * RGB_BYTES),
-                (2 * particles, shares * RGB_BYTES + 1),
+                (2 * particles, shares * RGB_BYTES + 2),
             ],
         )
     }

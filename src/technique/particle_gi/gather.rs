@@ -11,10 +11,13 @@
 //! (`lighting.rs`), indexed directly by the radiance key (dense within each object's key
 //! space: `id << 1 | side` below twice the object's count). They hold while the field and the lists do: a
 //! still view or a camera move estimates only the radiance particles it sees for the first
-//! time, and an intensity edit scales its share's estimates like the field.
+//! time, and an intensity edit scales its share's estimates like the field. Any other change
+//! of the field (a light moved, a material edited, links retraced) gathers again, in place,
+//! the estimates stored since the camera last moved whose lists still hold, and forgets the
+//! rest: the render then finds the view's estimates ready instead of missing them all.
 use super::lighting::Lighting;
 use super::links::{LinkSet, NON_DIFFUSE};
-use super::radiance::{key_parts, EstimationLists, RadianceKey, Tessellation};
+use super::radiance::{key_parts, EstimationLists, RadianceKey, Tessellation, OBJECT_SHIFT};
 use crate::core::Rgb;
 use rayon::prelude::*;
 use std::f32::consts::PI;
@@ -26,15 +29,18 @@ pub struct Estimates {
     shares: usize,
     values: Vec<Vec<Rgb>>,
     valid: Vec<Vec<bool>>,
+    /// Stored since the camera last moved: what a lighting change gathers again in place.
+    fresh: Vec<Vec<bool>>,
 }
 
 impl Estimates {
     /// An empty cache for the radiance particles of `tessellation` (both sides each).
     pub fn new(tessellation: &Tessellation, shares: usize) -> Estimates {
-        let mut e = Estimates { shares, values: Vec::new(), valid: Vec::new() };
+        let mut e = Estimates { shares, values: Vec::new(), valid: Vec::new(), fresh: Vec::new() };
         for &count in &tessellation.counts {
             e.values.push(vec![Rgb::BLACK; 2 * count as usize * shares]);
             e.valid.push(vec![false; 2 * count as usize]);
+            e.fresh.push(vec![false; 2 * count as usize]);
         }
         e
     }
@@ -43,11 +49,28 @@ impl Estimates {
     pub fn reset_object(&mut self, object: usize, count: u64) {
         self.values[object] = vec![Rgb::BLACK; 2 * count as usize * self.shares];
         self.valid[object] = vec![false; 2 * count as usize];
+        self.fresh[object] = vec![false; 2 * count as usize];
     }
 
     /// Forgets every estimate (the field or the lists changed).
     pub fn invalidate(&mut self) {
-        self.valid.iter_mut().flatten().for_each(|v| *v = false);
+        self.valid.iter_mut().chain(&mut self.fresh).flatten().for_each(|v| *v = false);
+    }
+
+    /// The camera moved: the estimates stay valid, but none is fresh.
+    pub fn age(&mut self) {
+        self.fresh.iter_mut().flatten().for_each(|v| *v = false);
+    }
+
+    /// The keys with a valid estimate stored since the camera last moved, in key order.
+    pub fn fresh_keys(&self) -> Vec<RadianceKey> {
+        let per_object = self.valid.iter().zip(&self.fresh).enumerate();
+        per_object
+            .flat_map(|(object, (valid, fresh))| {
+                let kept = valid.iter().zip(fresh).enumerate().filter(|(_, (&v, &f))| v && f);
+                kept.map(move |(k, _)| (object as RadianceKey) << OBJECT_SHIFT | k as RadianceKey)
+            })
+            .collect()
     }
 
     /// Multiplies share `g` by `factor`, as [`Lighting::scale`] does the field.
@@ -97,7 +120,7 @@ impl Estimates {
         for (n, &key) in keys.iter().enumerate() {
             let (object, k) = key_parts(key);
             self.values[object][k * shares..(k + 1) * shares].copy_from_slice(&values[n * shares..(n + 1) * shares]);
-            self.valid[object][k] = true;
+            (self.valid[object][k], self.fresh[object][k]) = (true, true);
         }
     }
 
@@ -107,7 +130,7 @@ impl Estimates {
 
     pub fn memory_bytes(&self) -> u64 {
         let values: usize = self.values.iter().map(Vec::len).sum();
-        let flags: usize = self.valid.iter().map(Vec::len).sum();
+        let flags: usize = self.valid.iter().chain(&self.fresh).map(Vec::len).sum();
         (values * std::mem::size_of::<Rgb>() + flags) as u64
     }
 }

@@ -28,7 +28,8 @@
 //!    are built for needed radiance particles that have none; gathering through the 16 × 16
 //!    links for the area particles in those lists and radiance estimation (`gather.rs`), only
 //!    for radiance particles without a cached estimate (the cache holds while the field and
-//!    the lists do, and scales with an intensity edit); final
+//!    the lists do, scales with an intensity edit, and after any other lighting change the
+//!    estimates cached since the camera last moved are gathered again in place); final
 //!    shading with direct light by shadow rays plus ρ/π times the indirect irradiance
 //!    interpolated over the hit's subtriangle. Optional adaptive supersampling re-samples
 //!    pixels that differ from a neighbour by more than a relative contrast.
@@ -292,7 +293,9 @@ impl ParticleGi {
     /// Runs the lighting stage where `delta` requires it (see `lighting.rs`): everything after
     /// a geometry change; a re-scatter from the kept direct flux after a material edit; per
     /// light edit, its share scaled (an intensity edit of a light alone in its share) or
-    /// re-emitted and re-scattered. Cached estimates follow.
+    /// re-emitted and re-scattered. Cached estimates follow: scaled with their share, or, after
+    /// any other change of the field, gathered again in place if fresh for the view and their
+    /// lists held (the rest are forgotten, `gather.rs`).
     fn update_lighting(&mut self, ctx: &RenderContext, delta: &SceneDelta, geometry_changed: bool) {
         let Some(g) = &self.geometry else { return };
         let inputs = Inputs {
@@ -331,8 +334,13 @@ impl ParticleGi {
                 work
             }
         };
-        self.estimates.invalidate();
+        // Fresh estimates whose lists held are gathered again in place; the rest go.
+        let keys: Vec<RadianceKey> =
+            self.estimates.fresh_keys().into_iter().filter(|k| g.lists.lists.contains_key(k)).collect();
+
         self.record(work);
+        self.estimates.invalidate();
+        self.gather_and_store(ctx, &keys);
     }
 
     fn record(&mut self, work: LightingWork) {
@@ -421,7 +429,7 @@ impl ParticleGi {
     /// Lists, gathering and estimation for the radiance particles `missing`, whose estimates
     /// are then cached.
     fn estimate_missing(&mut self, ctx: &RenderContext, missing: &[(RadianceKey, radiance::Vertex)]) {
-        let (Some(g), Some(lighting)) = (self.geometry.as_mut(), self.lighting.as_ref()) else { return };
+        let (Some(g), true) = (self.geometry.as_mut(), self.lighting.is_some()) else { return };
         let t = Instant::now();
         let (radius, cosine) = (self.config.estimation_radius * g.spacing, self.config.estimation_cosine);
         let built: Vec<(RadianceKey, radiance::EstimationList)> = missing
@@ -431,8 +439,17 @@ impl ParticleGi {
             .collect();
         self.pending.lists_built += built.len() as u64;
         g.lists.lists.extend(built);
+        self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
         let keys: Vec<RadianceKey> = missing.iter().map(|(k, _)| *k).collect();
-        let wanted = gather::particles_to_gather(&g.lists, &keys, g.particles.len());
+        self.gather_and_store(ctx, &keys);
+    }
+
+    /// Gathering (with the lazy links it needs) and estimation for the radiance particles
+    /// `keys`, whose lists exist; their estimates are then cached.
+    fn gather_and_store(&mut self, ctx: &RenderContext, keys: &[RadianceKey]) {
+        let (Some(g), Some(lighting)) = (self.geometry.as_mut(), self.lighting.as_ref()) else { return };
+        let t = Instant::now();
+        let wanted = gather::particles_to_gather(&g.lists, keys, g.particles.len());
         let lazily = g.gather.ensure(ctx.scene, ctx.accel, &g.particles, &g.grids, wanted.iter().copied());
         self.pending.links_traced += lazily;
         self.pending.links_built_lazily += lazily;
@@ -444,8 +461,8 @@ impl ParticleGi {
         self.pending.gathering_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
-        let values = gather::estimate(&g.lists, &keys, &gathered, &g.particles.areas, lighting.shares);
-        self.estimates.store(&keys, &values);
+        let values = gather::estimate(&g.lists, keys, &gathered, &g.particles.areas, lighting.shares);
+        self.estimates.store(keys, &values);
         self.pending.radiance_particles_estimated += keys.len() as u64;
         self.pending.estimation_ms += t.elapsed().as_secs_f64() * 1e3;
     }
@@ -505,6 +522,9 @@ impl Technique for ParticleGi {
         let t = Instant::now();
         let geometry_changed = self.update_geometry_stage(ctx, delta);
         self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
+        if delta.camera {
+            self.estimates.age();
+        }
         self.update_lighting(ctx, delta, geometry_changed);
         if !delta.is_empty() {
             self.passes = 0;
