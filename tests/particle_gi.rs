@@ -416,3 +416,17 @@ fn a_material_edit_regathers_the_view_in_place() {
         assert!(control > 1e-4, "the control passes: {control}");
     });
 }
+
+#[test]
+fn sides_that_can_never_be_lit_get_no_scattering_links() {
+    // Property: scattering links are traced only for the particles the lighting walks can
+    // reach from the directly lit ones. In the room, lit from inside and open towards the
+    // camera, the walls' outer sides and the slab's inside are never reached: about half the
+    // particles, whose links building every side (the control: every particle, 1.0) traced.
+    let frame = render(room(), TechniqueConfig::ParticleGi(config(6_000)), 3, 1, 2);
+    let st = stats(&frame);
+    let all = st.area_particles * u64::from(ParticleGiConfig::default().scatter_links.pow(2));
+    let share = st.scattering_links as f64 / all as f64;
+    eprintln!("scattering links: {} of {all} ({share:.3})", st.scattering_links);
+    assert!((0.35..0.65).contains(&share), "{share}");
+}

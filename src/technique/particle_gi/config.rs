@@ -174,9 +174,11 @@ pub struct ParticleStats {
     /// Links in both sets, and those traced this tick (all of them when built, the ones that
     /// may have changed when updated incrementally), with the box tests that chose them.
     pub links_total: u64,
+    /// Of `links_total`, the scattering links (built for the particles the walks reach).
+    pub scattering_links: u64,
     pub links_traced: u64,
-    /// Of `links_traced`, the gathering links of particles gathered for the first time (built
-    /// lazily, `links.rs`).
+    /// Of `links_traced`, the links built lazily (`links.rs`): gathering links of particles
+    /// gathered for the first time, scattering links of particles walks reach for the first time.
     pub links_built_lazily: u64,
     pub link_box_tests: u64,
     /// Radiance particles estimated this tick (those a camera sample needed with no cached

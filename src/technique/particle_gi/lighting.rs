@@ -71,36 +71,38 @@ pub struct Inputs<'a> {
     pub scene: &'a Scene,
     pub accel: &'a SceneAccel,
     pub particles: &'a AreaParticles,
-    pub links: &'a LinkSet,
     pub samples: u32,
     pub bounces: u32,
     pub seed: u64,
 }
 
 impl Lighting {
-    /// Every share from scratch.
-    pub fn compute(inputs: &Inputs) -> (Lighting, LightingWork) {
+    /// A field with no flux yet, for every share.
+    pub fn new(inputs: &Inputs) -> Lighting {
         let shares = share_count(inputs.scene.lights.len());
-        let mut lighting = Lighting {
-            shares,
-            direct: vec![Rgb::BLACK; inputs.particles.len() * shares],
-            radiance: vec![Rgb::BLACK; inputs.particles.len() * shares],
-        };
-        let all = vec![true; shares];
-        let work = lighting.redo(inputs, &all, &all);
-        (lighting, work)
+        let zeros = vec![Rgb::BLACK; inputs.particles.len() * shares];
+        Lighting { shares, direct: zeros.clone(), radiance: zeros }
     }
 
-    /// Re-emits the shares marked in `emit` and re-scatters those marked in `scatter` (a
-    /// superset: a material edit re-scatters every share from its kept direct flux).
-    pub fn redo(&mut self, inputs: &Inputs, emit: &[bool], scatter: &[bool]) -> LightingWork {
+    /// Re-emits the direct flux of the shares marked in `emit`.
+    pub fn emit(&mut self, inputs: &Inputs, emit: &[bool]) -> LightingWork {
         let t = Instant::now();
         let rays = if emit.contains(&true) { emit_flux(inputs, &mut self.direct, emit) } else { 0 };
-        let emission_ms = t.elapsed().as_secs_f64() * 1e3;
+        LightingWork { emission_rays: rays, emission_ms: t.elapsed().as_secs_f64() * 1e3, ..LightingWork::default() }
+    }
+
+    /// The particles with direct flux in a share marked in `shares`: where walks start.
+    pub fn lit(&self, shares: &[bool]) -> Vec<u32> {
+        let lit = |i: &usize| (0..self.shares).any(|g| shares[g] && !self.direct[i * self.shares + g].is_black());
+        (0..self.direct.len() / self.shares.max(1)).filter(lit).map(|i| i as u32).collect()
+    }
+
+    /// Re-scatters the shares marked in `scatter` from their kept direct flux along `links`
+    /// (built for every particle the walks from [`Lighting::lit`] reach).
+    pub fn scatter(&mut self, inputs: &Inputs, links: &LinkSet, scatter: &[bool]) -> LightingWork {
         let t = Instant::now();
-        let redo = scatter;
-        let (deposited, mut work) = scatter_flux(inputs, &self.direct, self.shares, redo);
-        let marked: Vec<usize> = (0..self.shares).filter(|&g| redo[g]).collect();
+        let (deposited, mut work) = scatter_flux(inputs, links, &self.direct, self.shares, scatter);
+        let marked: Vec<usize> = (0..self.shares).filter(|&g| scatter[g]).collect();
         let (particles, scene) = (inputs.particles, inputs.scene);
         for i in 0..particles.len() {
             let rho = particles.reflectance(scene, i) * FRAC_1_PI / particles.areas[i];
@@ -109,8 +111,6 @@ impl Lighting {
                 self.radiance[k] = rho * (self.direct[k] + deposited[i * marked.len() + m]);
             }
         }
-        work.emission_rays = rays;
-        work.emission_ms = emission_ms;
         work.scattering_ms = t.elapsed().as_secs_f64() * 1e3;
         work
     }
@@ -176,8 +176,14 @@ fn irradiance_from(inputs: &Inputs, l: usize, i: usize, origin: glam::Vec3, n: g
 /// Scatters the marked shares' direct flux along the scattering links: the first bounce
 /// through every link, then `bounces` single-link bounces. Returns the deposits per particle
 /// and marked share (`i * marked + m`, the m-th marked share).
-fn scatter_flux(inputs: &Inputs, direct: &[Rgb], shares: usize, redo: &[bool]) -> (Vec<Rgb>, LightingWork) {
-    let (particles, links) = (inputs.particles, inputs.links);
+fn scatter_flux(
+    inputs: &Inputs,
+    links: &LinkSet,
+    direct: &[Rgb],
+    shares: usize,
+    redo: &[bool],
+) -> (Vec<Rgb>, LightingWork) {
+    let particles = inputs.particles;
     let per = links.per_particle();
     let marked: Vec<usize> = (0..shares).filter(|&g| redo[g]).collect();
     let width = marked.len();
@@ -198,7 +204,7 @@ fn scatter_flux(inputs: &Inputs, direct: &[Rgb], shares: usize, redo: &[bool]) -
                     packets[m] = rho[i] * direct[i * shares + g] / per as f32;
                 }
                 for k in 0..per {
-                    count += walk(inputs, &rho, i, k, &packets, &mut acc);
+                    count += walk(inputs.bounces, inputs.seed, links, &rho, (i, k), &packets, &mut acc);
                 }
             }
             (acc, count)
@@ -216,8 +222,15 @@ fn scatter_flux(inputs: &Inputs, direct: &[Rgb], shares: usize, redo: &[bool]) -
 
 /// One scattering link's walk from particle `i` through link `k`: deposits the packets,
 /// times the reflectances met, at each particle reached. Returns the deposits made.
-fn walk(inputs: &Inputs, rho: &[Rgb], i: usize, k: usize, packets: &[Rgb], acc: &mut [Rgb]) -> u64 {
-    let links = inputs.links;
+fn walk(
+    bounces: u32,
+    seed: u64,
+    links: &LinkSet,
+    rho: &[Rgb],
+    (i, k): (usize, usize),
+    packets: &[Rgb],
+    acc: &mut [Rgb],
+) -> u64 {
     let per = links.per_particle();
     let width = packets.len();
     let mut at = links.ends_of(i)[k];
@@ -233,8 +246,8 @@ fn walk(inputs: &Inputs, rho: &[Rgb], i: usize, k: usize, packets: &[Rgb], acc: 
     let mut throughput = Rgb::new(1.0, 1.0, 1.0);
     deposit(acc, at, throughput);
     let mut count = 1;
-    let mut rng = Rng::new(inputs.seed ^ 0x5343_4154, (i * per + k) as u64); // "SCAT"
-    for _ in 0..inputs.bounces {
+    let mut rng = Rng::new(seed ^ 0x5343_4154, (i * per + k) as u64); // "SCAT"
+    for _ in 0..bounces {
         throughput = rho[at as usize] * throughput;
         let pick = (rng.next_u32() as usize) % per;
         let next = links.ends_of(at as usize)[pick];

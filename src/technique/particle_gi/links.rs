@@ -14,12 +14,15 @@
 //!
 //! Beyond the paper, a set can be built lazily: a particle's links are traced the first time
 //! they are asked for ([`LinkSet::ensure`]) and stored in the order asked, behind a slot per
-//! particle. The gathering set is built so (only particles in a needed estimation list are
-//! ever gathered, so sides never seen cost nothing); the scattering set, which every walk may
-//! reach, is built whole. The links themselves do not depend on when they are traced, so a
-//! lazy set holds what a full one would for every particle it has. When an object moves, a
-//! lazy set forgets its particles' links ([`LinkSet::forget`]) rather than retracing them: only
-//! those gathered again are traced again.
+//! particle. The gathering set is built so (only particles in a needed estimation list are ever
+//! gathered, so sides never seen cost nothing), and so is the scattering set, for the particles
+//! the lighting stage's walks can reach from the directly lit ones
+//! ([`LinkSet::ensure_reached`]): sides that can never be lit, such as the inside of a closed
+//! object or the outside of a closed room, cost nothing. The links themselves do not depend on
+//! when they are traced, so a lazy set holds what a full one would for every particle it has.
+//! When an object moves, the gathering set forgets its particles' links ([`LinkSet::forget`])
+//! rather than retracing them, and only those gathered again are traced again; the scattering
+//! set retraces its own, which the next walks need.
 use super::grid::ObjectGrids;
 use super::particles::AreaParticles;
 use crate::core::frame::ShadingFrame;
@@ -129,6 +132,28 @@ impl LinkSet {
             self.distance[links].iter_mut().zip(traced).for_each(|(d, t)| *d = t.distance);
         }
         traced.len() as u64
+    }
+
+    /// Builds the links of every particle reachable from `from` through the set's links (the
+    /// particles a walk from them may visit), round by round. Returns the rays traced.
+    pub fn ensure_reached(
+        &mut self,
+        scene: &Scene,
+        accel: &SceneAccel,
+        particles: &AreaParticles,
+        grids: &ObjectGrids,
+        from: &[u32],
+    ) -> u64 {
+        let mut seen = vec![false; self.slot.len()];
+        let mut frontier: Vec<u32> =
+            from.iter().copied().filter(|&i| !std::mem::replace(&mut seen[i as usize], true)).collect();
+        let mut traced = 0;
+        while !frontier.is_empty() {
+            traced += self.ensure(scene, accel, particles, grids, frontier.iter().copied());
+            let ends = frontier.iter().flat_map(|&i| self.ends_of(i as usize).iter().copied());
+            frontier = ends.filter(|&e| e < NON_DIFFUSE && !std::mem::replace(&mut seen[e as usize], true)).collect();
+        }
+        traced
     }
 
     /// Forgets the links of the particles with `drop(i)` (their slots are reused), so they are

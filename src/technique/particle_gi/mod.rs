@@ -5,9 +5,10 @@
 //!
 //! # Algorithm
 //! 1. Geometry stage (§4.1; when geometry changes): area particles over the diffuse surfaces
-//!    (`particles.rs`, §3.1), n_s × n_s scattering links traced with Embree (`links.rs`);
-//!    gathering links are traced lazily, the first time a particle is gathered, so surfaces never
-//!    seen cost none (beyond the paper, which built all up front); and the implicit radiance
+//!    (`particles.rs`, §3.1), n_s × n_s scattering links traced with Embree (`links.rs`) for the
+//!    particles the lighting walks can reach, so sides never lit cost none, and gathering links
+//!    the first time a particle is gathered, so sides never seen cost none (beyond the paper,
+//!    which built all up front); and the implicit radiance
 //!    particles of the tessellated triangles (`radiance.rs`, §3.2). When objects move, only links
 //!    that may have changed are retraced (beyond the paper, which rebuilt all links in seconds):
 //!    those of particles on a moved object (carried by its transform, not resampled; their
@@ -203,10 +204,9 @@ impl ParticleGi {
         let spacing = particles.area.max(f32::MIN_POSITIVE).sqrt();
         let grids = ObjectGrids::build(&particles, ctx.scene.objects.len(), GRID_CELL * spacing);
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
-        let mut scatter = LinkSet::empty(c.scatter_links, c.seed ^ SCATTER_SALT, diagonal, particles.len());
-        self.pending.links_traced +=
-            scatter.ensure(ctx.scene, ctx.accel, &particles, &grids, 0..particles.len() as u32);
-        // Gathering links are traced when a particle is first gathered (`estimate_missing`).
+        // Scattering links are traced for the particles walks reach (`update_lighting`), and
+        // gathering links when a particle is first gathered (`estimate_missing`).
+        let scatter = LinkSet::empty(c.scatter_links, c.seed ^ SCATTER_SALT, diagonal, particles.len());
         let gather = LinkSet::empty(c.gather_links, c.seed ^ GATHER_SALT, diagonal, particles.len());
         let tessellation = Tessellation::build(ctx.scene, c.subtriangle_edge * spacing);
         self.estimates = Estimates::new(&tessellation, lighting::share_count(ctx.scene.lights.len()));
@@ -293,54 +293,67 @@ impl ParticleGi {
     /// Runs the lighting stage where `delta` requires it (see `lighting.rs`): everything after
     /// a geometry change; a re-scatter from the kept direct flux after a material edit; per
     /// light edit, its share scaled (an intensity edit of a light alone in its share) or
-    /// re-emitted and re-scattered. Cached estimates follow: scaled with their share, or, after
-    /// any other change of the field, gathered again in place if fresh for the view and their
-    /// lists held (the rest are forgotten, `gather.rs`).
+    /// re-emitted and re-scattered. Scattering links are built first for every particle the
+    /// walks can reach. Cached estimates follow: scaled with their share, or, after any other
+    /// change of the field, gathered again in place if fresh for the view and their lists held
+    /// (the rest are forgotten, `gather.rs`).
     fn update_lighting(&mut self, ctx: &RenderContext, delta: &SceneDelta, geometry_changed: bool) {
-        let Some(g) = &self.geometry else { return };
-        let inputs = Inputs {
-            scene: ctx.scene,
-            accel: ctx.accel,
-            particles: &g.particles,
-            links: &g.scatter,
-            samples: self.config.emission_samples,
-            bounces: self.bounces(ctx.scene),
-            seed: self.config.seed,
-        };
-        let work = match self.lighting.as_mut() {
-            Some(lighting) if !geometry_changed => {
-                let lights = ctx.scene.lights.len();
-                let mut emit = vec![false; lighting.shares];
-                for change in &delta.lights {
-                    let share = change.light % lighting.shares;
-                    match change.rescale {
-                        Some(f) if !change.moved && lighting::alone_in_share(change.light, lights) => {
-                            lighting.scale(share, f);
-                            self.estimates.scale(share, f);
-                            self.pending.lights_rescaled += 1;
-                        }
-                        _ => emit[share] = true,
-                    }
-                }
-                let scatter = if delta.materials.is_empty() { emit.clone() } else { vec![true; lighting.shares] };
-                if !scatter.contains(&true) {
-                    return;
-                }
-                lighting.redo(&inputs, &emit, &scatter)
-            }
-            _ => {
-                let (lighting, work) = Lighting::compute(&inputs);
-                self.lighting = Some(lighting);
-                work
-            }
-        };
+        let bounces = self.bounces(ctx.scene);
+        let Some((emit, scatter)) = self.lighting_plan(ctx, delta, geometry_changed) else { return };
+        let (Some(g), Some(lighting)) = (self.geometry.as_mut(), self.lighting.as_mut()) else { return };
+        let (samples, seed) = (self.config.emission_samples, self.config.seed);
+        let inputs = Inputs { scene: ctx.scene, accel: ctx.accel, particles: &g.particles, samples, bounces, seed };
+        let emitted = lighting.emit(&inputs, &emit);
+        let t = Instant::now();
+        let lit = lighting.lit(&scatter);
+        let reached = g.scatter.ensure_reached(ctx.scene, ctx.accel, &g.particles, &g.grids, &lit);
+        let geometry_ms = t.elapsed().as_secs_f64() * 1e3;
+        let work = lighting.scatter(&inputs, &g.scatter, &scatter);
         // Fresh estimates whose lists held are gathered again in place; the rest go.
         let keys: Vec<RadianceKey> =
             self.estimates.fresh_keys().into_iter().filter(|k| g.lists.lists.contains_key(k)).collect();
-
-        self.record(work);
+        self.pending.links_traced += reached;
+        self.pending.links_built_lazily += reached;
+        self.pending.geometry_ms += geometry_ms;
+        self.record(LightingWork { emission_rays: emitted.emission_rays, emission_ms: emitted.emission_ms, ..work });
         self.estimates.invalidate();
         self.gather_and_store(ctx, &keys);
+    }
+
+    /// Which shares to re-emit and re-scatter, with intensity edits applied as scales (`None`:
+    /// no lighting work). A geometry change, or no field yet, starts a new field.
+    fn lighting_plan(
+        &mut self,
+        ctx: &RenderContext,
+        delta: &SceneDelta,
+        geometry_changed: bool,
+    ) -> Option<(Vec<bool>, Vec<bool>)> {
+        let g = self.geometry.as_ref()?;
+        let (lights, shares) = (ctx.scene.lights.len(), lighting::share_count(ctx.scene.lights.len()));
+        let lighting = match self.lighting.as_mut() {
+            Some(lighting) if !geometry_changed && lighting.shares == shares => lighting,
+            _ => {
+                let (samples, seed) = (self.config.emission_samples, self.config.seed);
+                let inputs =
+                    Inputs { scene: ctx.scene, accel: ctx.accel, particles: &g.particles, samples, bounces: 0, seed };
+                self.lighting = Some(Lighting::new(&inputs));
+                return Some((vec![true; shares], vec![true; shares]));
+            }
+        };
+        let mut emit = vec![false; shares];
+        for change in &delta.lights {
+            let share = change.light % shares;
+            match change.rescale {
+                Some(f) if !change.moved && lighting::alone_in_share(change.light, lights) => {
+                    lighting.scale(share, f);
+                    self.estimates.scale(share, f);
+                    self.pending.lights_rescaled += 1;
+                }
+                _ => emit[share] = true,
+            }
+        }
+        let scatter = if delta.materials.is_empty() { emit.clone() } else { vec![true; shares] };
+        scatter.contains(&true).then_some((emit, scatter))
     }
 
     fn record(&mut self, work: LightingWork) {
@@ -573,6 +586,7 @@ impl Technique for ParticleGi {
             stats.particle_area = g.particles.area as f64;
             stats.radiance_particles = g.tessellation.total;
             stats.links_total = (g.scatter.len() + g.gather.len()) as u64;
+            stats.scattering_links = g.scatter.len() as u64;
             stats.lists_cached = g.lists.lists.len() as u64;
             stats.estimates_cached = self.estimates.cached();
             let memory = &mut stats.memory;
