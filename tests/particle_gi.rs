@@ -135,6 +135,21 @@ fn the_incremental_link_update_equals_a_full_rebuild() {
     });
 }
 
+/// Runs `f` on two sessions of the room (6 000 particles, seed 3) after their first tick, with
+/// the first session's frame.
+fn room_twins(f: impl FnOnce(Session, Session, Frame) + Send) {
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    pool.install(|| {
+        let c = TechniqueConfig::ParticleGi(config(6_000));
+        let mut s = Session::new(room(), &c, 3, &device).expect("session");
+        let mut twin = Session::new(room(), &c, 3, &device).expect("session");
+        let first = s.tick().unwrap();
+        twin.tick().unwrap();
+        f(s, twin, first)
+    });
+}
+
 #[test]
 fn a_moving_light_does_no_geometry_work() {
     // Property: a light that moves re-runs the lighting stage only: no link is retraced or
@@ -143,14 +158,7 @@ fn a_moving_light_does_no_geometry_work() {
     // only 0.1 mm (lists follow the camera samples, which jitter from tick to tick; a change
     // restarts the accumulation, so the twin needs a real one too), while the image changes:
     // the twin's mean is the unmoved light's to about 1e-4, so a 1% difference is the move.
-    let device = Device::new(2).unwrap();
-    let pool = thread_pool(2).unwrap();
-    pool.install(|| {
-        let c = TechniqueConfig::ParticleGi(config(6_000));
-        let mut s = Session::new(room(), &c, 3, &device).expect("session");
-        let mut twin = Session::new(room(), &c, 3, &device).expect("session");
-        s.tick().unwrap();
-        twin.tick().unwrap();
+    room_twins(|mut s, mut twin, _| {
         let lamp = |translation| {
             let transform = Trs { translation, rotation: [0.0, 0.0, 0.0, 1.0], scale: [1.0; 3] };
             vec![Edit::Light { name: "lamp".into(), transform: Some(transform), emitter: None }]
@@ -389,14 +397,7 @@ fn a_material_edit_regathers_the_view_in_place() {
     // estimates the whole view afresh. A stale estimate would keep the red wall's old colour
     // bleeding; negative control: the frame before the edit (the red wall turned green) fails
     // the same tolerance.
-    let device = Device::new(2).unwrap();
-    let pool = thread_pool(2).unwrap();
-    pool.install(|| {
-        let c = TechniqueConfig::ParticleGi(config(6_000));
-        let mut s = Session::new(room(), &c, 3, &device).expect("session");
-        let mut twin = Session::new(room(), &c, 3, &device).expect("session");
-        let before = s.tick().unwrap();
-        twin.tick().unwrap();
+    room_twins(|mut s, mut twin, before| {
         let green = relume::scene::Material::Diffuse { reflectance: relume::core::Rgb::new(0.2, 0.7, 0.1) };
         let edit = Edit::Material { name: "red".into(), material: green };
         let nudge = Edit::Camera { position: Some([0.0, 1.0, -2.50001]), look_at: None, up: None, vfov_deg: None };
