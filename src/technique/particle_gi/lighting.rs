@@ -77,10 +77,10 @@ pub struct Inputs<'a> {
 }
 
 impl Lighting {
-    /// A field with no flux yet, for every share.
-    pub fn new(inputs: &Inputs) -> Lighting {
-        let shares = share_count(inputs.scene.lights.len());
-        let zeros = vec![Rgb::BLACK; inputs.particles.len() * shares];
+    /// A field with no flux yet, for `particles` particles and `lights` lights' shares.
+    pub fn new(particles: usize, lights: usize) -> Lighting {
+        let shares = share_count(lights);
+        let zeros = vec![Rgb::BLACK; particles * shares];
         Lighting { shares, direct: zeros.clone(), radiance: zeros }
     }
 

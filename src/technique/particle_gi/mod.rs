@@ -8,16 +8,16 @@
 //!    (`particles.rs`, §3.1), n_s × n_s scattering links traced with Embree (`links.rs`) for the
 //!    particles the lighting walks can reach, so sides never lit cost none, and gathering links
 //!    the first time a particle is gathered, so sides never seen cost none (beyond the paper,
-//!    which built all up front); and the implicit radiance
-//!    particles of the tessellated triangles (`radiance.rs`, §3.2). When objects move, only links
-//!    that may have changed are retraced (beyond the paper, which rebuilt all links in seconds):
-//!    those of particles on a moved object (carried by its transform, not resampled; their
-//!    gathering links are forgotten and traced again when next gathered), those ending on one, and
-//!    those whose segment touches a moved surface's old or new bounds; only the moved objects'
-//!    lookup grids are rebuilt. Estimation lists near moved objects are dropped. A change of scale
-//!    keeps every object's point count while each stays within a factor 2 of its area's share
-//!    (`particles::Layout`): the object's particles keep their indices and get new areas, and it
-//!    alone is re-tessellated; otherwise all is resampled.
+//!    which built all up front); and the implicit radiance particles of the tessellated triangles
+//!    (`radiance.rs`, §3.2). When objects move, only links that may have changed are retraced
+//!    (beyond the paper, which rebuilt all links in seconds): those of particles on a moved object
+//!    (carried by its transform, not resampled; their gathering links are forgotten and traced
+//!    again when next gathered), those ending on one, and those whose segment touches a moved
+//!    surface's old or new bounds; only the moved objects' lookup grids are rebuilt. Estimation
+//!    lists near moved objects are dropped. A change of scale keeps every object's point count
+//!    while each stays within a factor 2 of its area's share (`particles::Layout`): the object's
+//!    particles keep their indices and get new areas, and it alone is re-tessellated; otherwise
+//!    all is resampled.
 //! 2. Lighting stage (§4.2; when lights, materials or geometry change, `lighting.rs`):
 //!    emission to the particles, the first bounce through all scattering links, n_b more
 //!    bounces through one random link each, and L = ρ/π · φ/ΔA. Beyond the paper, the field
@@ -315,7 +315,8 @@ impl ParticleGi {
         self.pending.links_traced += reached;
         self.pending.links_built_lazily += reached;
         self.pending.geometry_ms += geometry_ms;
-        self.record(LightingWork { emission_rays: emitted.emission_rays, emission_ms: emitted.emission_ms, ..work });
+        self.record(emitted);
+        self.record(work);
         self.estimates.invalidate();
         self.gather_and_store(ctx, &keys);
     }
@@ -333,10 +334,7 @@ impl ParticleGi {
         let lighting = match self.lighting.as_mut() {
             Some(lighting) if !geometry_changed && lighting.shares == shares => lighting,
             _ => {
-                let (samples, seed) = (self.config.emission_samples, self.config.seed);
-                let inputs =
-                    Inputs { scene: ctx.scene, accel: ctx.accel, particles: &g.particles, samples, bounces: 0, seed };
-                self.lighting = Some(Lighting::new(&inputs));
+                self.lighting = Some(Lighting::new(g.particles.len(), lights));
                 return Some((vec![true; shares], vec![true; shares]));
             }
         };
