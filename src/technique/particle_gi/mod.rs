@@ -13,11 +13,11 @@
 //!    (beyond the paper, which rebuilt all links in seconds): those of particles on a moved object
 //!    (carried by its transform, not resampled; their gathering links are forgotten and traced
 //!    again when next gathered), those ending on one, and those whose segment touches a moved
-//!    surface's old or new bounds; only the moved objects' lookup grids are rebuilt. Estimation
-//!    lists near moved objects are dropped. A change of scale keeps every object's point count
-//!    while each stays within a factor 2 of its area's share (`particles::Layout`): the object's
-//!    particles keep their indices and get new areas, and it alone is re-tessellated; otherwise
-//!    all is resampled.
+//!    surface's old or new bounds; only the moved objects' lookup grids are rebuilt. Only the
+//!    estimation lists on moved objects are dropped (a list holds its own object's particles).
+//!    A change of scale keeps every object's point count while each stays within a factor 2 of
+//!    its area's share (`particles::Layout`): the object's particles keep their indices and get
+//!    new areas, and it alone is re-tessellated; otherwise all is resampled.
 //! 2. Lighting stage (§4.2; when lights, materials or geometry change, `lighting.rs`):
 //!    emission to the particles, the first bounce through all scattering links, n_b more
 //!    bounces through one random link each, and L = ρ/π · φ/ΔA. Beyond the paper, the field
@@ -261,7 +261,7 @@ impl ParticleGi {
             self.pending.links_traced += traced;
             self.pending.link_box_tests += tests;
         }
-        g.lists.invalidate(&moved, &boxes, self.config.estimation_radius * g.spacing);
+        g.lists.invalidate(&moved);
     }
 
     /// Builds or updates the geometry stage as `delta` requires. Returns whether it changed.

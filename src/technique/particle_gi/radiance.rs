@@ -13,12 +13,12 @@
 //! particles lie within R of its bottom and face the same way as its inner side), nor a
 //! closed object's wall thinner than R (its inner side's particles face the way the outer
 //! side's do across the wall). Beyond the paper, they are built only for radiance
-//! particles a camera sample actually needs, cached across ticks, and dropped near objects that
-//! move. A list that would be empty falls back to the nearest particle on the same side of the
+//! particles a camera sample actually needs, cached across ticks, and dropped when their own
+//! object moves: a list depends on nothing else, so another object's move leaves it as a
+//! rebuild would make it. A list that would be empty falls back to the nearest particle on the same side of the
 //! same object, so every shading point gets an estimate.
 use super::grid::ObjectGrids;
 use super::particles::{pose, AreaParticles};
-use crate::scene::edits::Aabb;
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
 use std::collections::HashMap;
@@ -142,7 +142,6 @@ impl Tessellation {
 /// A cached estimation list.
 #[derive(Clone, Debug)]
 pub struct EstimationList {
-    pub position: Vec3,
     pub object: u32,
     pub particles: Vec<u32>,
 }
@@ -183,22 +182,13 @@ impl EstimationLists {
         if found.is_empty() {
             found.extend(grid.nearest(particles, q, 8, |k| particles.normal[k].dot(n) > 0.0));
         }
-        EstimationList { position: q, object: v.object, particles: found }
+        EstimationList { object: v.object, particles: found }
     }
 
-    /// Drops the lists of radiance particles on a moved object (`moved[object]`) or within
-    /// `radius` of a moved surface's old or new bounds. Returns how many went.
-    pub fn invalidate(&mut self, moved: &[bool], boxes: &[Aabb], radius: f32) -> u64 {
-        let before = self.lists.len();
-        self.lists.retain(|_, l| {
-            let near = boxes.iter().any(|b| {
-                let lo = b.min - Vec3::splat(radius);
-                let hi = b.max + Vec3::splat(radius);
-                l.position.cmpge(lo).all() && l.position.cmple(hi).all()
-            });
-            !(near || moved.get(l.object as usize).copied().unwrap_or(true))
-        });
-        (before - self.lists.len()) as u64
+    /// Drops the lists of radiance particles on a moved object (`moved[object]`): they are
+    /// made of their own object's particles only.
+    pub fn invalidate(&mut self, moved: &[bool]) {
+        self.lists.retain(|_, l| !moved.get(l.object as usize).copied().unwrap_or(true));
     }
 
     pub fn memory_bytes(&self) -> u64 {
