@@ -15,8 +15,8 @@
 //! side's do across the wall). Beyond the paper, they are built only for radiance
 //! particles a camera sample actually needs, cached across ticks, and dropped when their own
 //! object moves: a list depends on nothing else, so another object's move leaves it as a
-//! rebuild would make it. A list that would be empty falls back to the nearest particle on the same side of the
-//! same object, so every shading point gets an estimate.
+//! rebuild would make it. A list that would be empty falls back to the nearest particle on
+//! the same side of the same object, so every shading point gets an estimate.
 use super::grid::ObjectGrids;
 use super::particles::{pose, AreaParticles};
 use crate::scene::Scene;
