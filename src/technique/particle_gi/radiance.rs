@@ -296,6 +296,53 @@ mod tests {
     }
 
     #[test]
+    fn another_objects_move_keeps_a_list_as_a_rebuild_makes_it() {
+        // Property: a list holds only its own object's particles, so when the box's particles
+        // move, `invalidate` keeps the floor's lists, even those within R of the box, and each
+        // equals the list built afresh after the move; the box's go. Negative control: the
+        // box's own lists, built again after the move, differ from before it.
+        let Fixture { scene, mut particles, mut grids, tessellation, radius, cosine } = fixture();
+        let mut lists = EstimationLists::default();
+        let mut vertices = Vec::new();
+        // The box is 0.6 wide, centred 0.3 above the floor's centre.
+        let near_box = |q: Vec3| (q - Vec3::new(0.0, 0.3, 0.0)).length() < 0.52 + radius;
+        for object in 0..2u32 {
+            for triangle in 0..2u32 {
+                let grid = (1..20).flat_map(|a| (1..20 - a).map(move |b| (a as f32 / 20.0, b as f32 / 20.0)));
+                for (u, v) in grid {
+                    let corners = tessellation.corners(object, triangle, Vec2::new(u, v), 0).expect("corners");
+                    for (key, vertex, _) in corners {
+                        lists
+                            .lists
+                            .insert(key, EstimationLists::build(&scene, &particles, &grids, &vertex, radius, cosine));
+                        vertices.push((key, vertex));
+                    }
+                }
+            }
+        }
+        let floor_near = vertices.iter().filter(|(_, v)| v.object == 0 && near_box(v.pose(&scene).0)).count();
+        assert!(floor_near > 4, "too few floor lists near the box: {floor_near}");
+        let before = lists.clone();
+        for k in particles.range_of(1) {
+            particles.position[k] += Vec3::new(0.05, 0.0, 0.1);
+        }
+        grids.rebuild(&particles, 1);
+        lists.invalidate(&[false, true]);
+        let mut changed = 0;
+        for (key, vertex) in &vertices {
+            let fresh = EstimationLists::build(&scene, &particles, &grids, vertex, radius, cosine);
+            match vertex.object {
+                0 => assert_eq!(lists.lists.get(key).map(|l| &l.particles), Some(&fresh.particles), "floor {key}"),
+                _ => {
+                    assert!(!lists.lists.contains_key(key), "a list of the moved box was kept");
+                    changed += usize::from(before.lists[key].particles != fresh.particles);
+                }
+            }
+        }
+        assert!(changed > 0, "the move changed no list of the box: the control shows nothing");
+    }
+
+    #[test]
     fn the_floor_lies_within_the_lists_reach_of_the_box_bottom() {
         // The negative control of `no_light_crosses_a_contact` (tests/particle_gi.rs): the
         // box's bottom rests on the floor, so radiance particles on its inner side (facing up)
