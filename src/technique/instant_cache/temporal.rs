@@ -8,7 +8,8 @@
 //! - **Case 3** (ray now occluded): every other ray that touches a moved surface's new bounds
 //!   is traced against a separate scene holding only the moved surfaces where they are now
 //!   (the same bottom-level scenes and transforms as the full scene, so the answer is the one
-//!   the full scene would give for them).
+//!   the full scene would give for them). An unchanged VPL that was visible keeps its stored
+//!   contribution unless case 3 finds it blocked: its G′ is not worked out again.
 //! - **Case 4** (ray deoccluded): a ray that was in shadow and not found occluded by case 3 is
 //!   tested against the moved surfaces' old world AABBs; only if it touches one is it traced
 //!   against the full scene.
@@ -190,6 +191,15 @@ impl TickChanges {
                     VplChange::Invalidated => return self.retrace(accel, vpl, p, n, min_distance, &mut work),
                 };
                 let before = record.contributions.get(old).copied().unwrap_or(0);
+                if before != 0 && matches!(change, VplChange::Same(_)) {
+                    // The same VPL, seen before: its contribution stands unless a moved
+                    // surface now blocks it, and is not worked out again.
+                    if self.still_visible(accel, vpl, from, true, &mut work) {
+                        return before;
+                    }
+                    work.occluded += 1;
+                    return 0;
+                }
                 let Some((e, _, _)) = irradiance_from(vpl, p, n, min_distance) else { return 0 };
                 let visible_before = before != 0;
                 if !visible_before && matches!(change, VplChange::Reweighted(_)) {
