@@ -10,7 +10,7 @@
 //! with w_k(x) > 1 are used, and where none is, a new one is made (on demand). The paper's
 //! single tolerance is θ = acos(1 − a²) (4.05° at a = 0.05): its weights are these times 1/a,
 //! which the interpolation's normalisation cancels.
-use super::octree::Octree;
+use super::grid::RecordGrid;
 use super::rgbe;
 use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
 use crate::core::Rgb;
@@ -90,7 +90,10 @@ pub fn compute_record(
     (Record::new(p, n, object, contributions, tick), lit.len() as u64)
 }
 
-/// What the octree keeps of a record: enough to weigh it without touching the record.
+/// Bytes the grid keeps per record.
+pub const KEY_BYTES: u64 = std::mem::size_of::<Key>() as u64;
+
+/// What the grid keeps of a record: enough to weigh it without touching the record.
 #[derive(Clone, Copy, Debug)]
 struct Key {
     index: u32,
@@ -98,10 +101,10 @@ struct Key {
     normal: Vec3,
 }
 
-/// Records and the octree over them.
+/// Records and the grid over them.
 pub struct Cache {
     pub records: Vec<Record>,
-    octree: Octree<Key>,
+    grid: RecordGrid<Key>,
     /// a·D: how far a record reaches, in scene units.
     reach: f32,
     /// 1/√(1 − cos θ): the normal term's scale.
@@ -119,14 +122,14 @@ impl Cache {
     /// to their diagonal) and normal tolerance `normal_tolerance_deg` (degrees, in (0, 90]).
     pub fn new(lo: Vec3, hi: Vec3, radius: f32, normal_tolerance_deg: f32) -> Cache {
         let reach = radius * (hi - lo).length().max(f32::MIN_POSITIVE);
-        let octree = Octree::new((lo + hi) * 0.5, (hi - lo).max_element() * 0.5, reach / 2.0);
+        let grid = RecordGrid::new(lo, hi, reach);
         let normal_scale = 1.0 / (1.0 - normal_tolerance_deg.to_radians().cos()).max(f32::EPSILON).sqrt();
-        Cache { records: Vec::new(), octree, reach, normal_scale, renumbering: None }
+        Cache { records: Vec::new(), grid, reach, normal_scale, renumbering: None }
     }
 
     pub fn clear(&mut self) {
         self.records.clear();
-        self.octree.clear();
+        self.grid.clear();
         self.renumbering = None;
     }
 
@@ -156,9 +159,9 @@ impl Cache {
             });
         }
         if self.records.len() < before {
-            self.octree.clear();
+            self.grid.clear();
             for (i, r) in self.records.iter().enumerate() {
-                self.octree.insert(Key { index: i as u32, position: r.position, normal: r.normal }, r.position);
+                self.grid.insert(Key { index: i as u32, position: r.position, normal: r.normal }, r.position);
             }
         }
         (before - self.records.len()) as u64
@@ -172,7 +175,7 @@ impl Cache {
 
     pub fn insert(&mut self, record: Record) -> u32 {
         let index = self.records.len() as u32;
-        self.octree.insert(Key { index, position: record.position, normal: record.normal }, record.position);
+        self.grid.insert(Key { index, position: record.position, normal: record.normal }, record.position);
         self.records.push(record);
         index
     }
@@ -182,7 +185,7 @@ impl Cache {
     /// for the distance test. Returns false if `f` stopped it.
     fn visit(&self, p: Vec3, n: Vec3, mut f: impl FnMut(u32, f32) -> bool) -> bool {
         let reach = self.reach;
-        self.octree.query(p, reach, |key| {
+        self.grid.query(p, reach, |key| {
             let d2 = (p - key.position).length_squared();
             if d2 >= reach * reach {
                 return true;
@@ -213,7 +216,7 @@ impl Cache {
     pub fn memory_bytes(&self) -> u64 {
         let records: u64 =
             self.records.iter().map(|r| (std::mem::size_of::<Record>() + r.contributions.len() * 4) as u64).sum();
-        records + self.octree.memory_bytes()
+        records + self.grid.memory_bytes()
     }
 }
 

@@ -87,8 +87,9 @@ pub const MAX_VPLS: u32 = 65_536;
 
 impl InstantCacheConfig {
     /// Resident memory at `pixels` pixels (`budget.rs`): the VPLs and the cache records, at
-    /// most one per camera sample of a tick, each holding 4 bytes per VPL; `audit` holds a
-    /// second cache while it recomputes; the caches keep each sample's hit, result and weights.
+    /// most one per camera sample of a tick, each holding 4 bytes per VPL and its grid entry,
+    /// and the empty grid; `audit` holds a second cache while it recomputes; the caches keep
+    /// each sample's hit, result and weights.
     pub fn resident_estimate(&self, pixels: u64) -> Result<MemoryEstimate, TechniqueError> {
         let vpls = u64::from(self.vpls);
         let samples = pixels.saturating_mul(u64::from(self.spp));
@@ -97,7 +98,12 @@ impl InstantCacheConfig {
         // estimated at `WEIGHTS_PER_SAMPLE` each.
         let kept = if self.mode == CacheMode::Igi { 0 } else { samples };
         let per_sample = super::pixels::STATE_BYTES + WEIGHTS_PER_SAMPLE * super::pixels::WEIGHT_BYTES;
-        product_sum("vpls", &[(vpls, size::<Vpl>()), (records, size::<Record>() + 4 * vpls), (kept, per_sample)])
+        let record = size::<Record>() + 4 * vpls + super::cache::KEY_BYTES;
+        let grid = if self.mode == CacheMode::Igi { 0 } else { 1 + u64::from(self.audit) };
+        product_sum(
+            "vpls",
+            &[(vpls, size::<Vpl>()), (records, record), (kept, per_sample), (grid, super::grid::MAX_EMPTY_BYTES)],
+        )
     }
 
     pub fn validate(&self) -> Result<(), TechniqueError> {
@@ -193,7 +199,7 @@ pub struct InstantCacheStats {
     /// the IGI gather and filter.
     pub indirect_ms: f64,
     pub render_ms: f64,
-    /// `vpls` and `cache` (records, their contributions and the octree).
+    /// `vpls` and `cache` (records, their contributions and the grid).
     pub memory: crate::technique::ResidentMemory,
     /// With `audit`: records checked, those differing from a fresh computation, and those no
     /// longer on any surface.

@@ -14,7 +14,7 @@
 //! 3. Indirect diffuse light, by mode:
 //!    - `igi` (`igi.rs`): each pixel gathers its n×n-interleaved subset of the VPLs with
 //!      visibility rays, then a discontinuity buffer averages the n×n neighbourhood.
-//!    - `static` (`cache.rs`, `octree.rs`, `pixels.rs`): an irradiance cache cleared every
+//!    - `static` (`cache.rs`, `grid.rs`, `pixels.rs`): an irradiance cache cleared every
 //!      tick. In pixel order, a record is made wherever no record has weight w_k(x) > 1 (eq. 5,
 //!      with the distance and normal tolerances apart: `cache.rs`); records are computed in
 //!      parallel, each with one visibility ray per VPL and G′ (eqs. 2–3), and every pixel
@@ -72,8 +72,8 @@
 mod cache;
 mod config;
 pub use config::DESCRIPTION;
+mod grid;
 mod igi;
-mod octree;
 mod pixels;
 mod rgbe;
 mod temporal;

@@ -1,7 +1,7 @@
 //! Each camera sample's interpolation (eq. 4): the records with w_k(x) > 1 at its first
 //! diffuse hit x and their weights, which `temporal` keeps from tick to tick.
 //!
-//! A sample looks the cache up (one octree query) only when it must: its hit changed, one of
+//! A sample looks the cache up (one grid query) only when it must: its hit changed, one of
 //! its records went (`Cache::retain` reports the renumbering), or a record made this tick may
 //! reach it (a cell grid of this tick's new records says so; cells are at least the records'
 //! reach wide, so the 27 cells around a new record hold every point it reaches). Otherwise it

@@ -1,0 +1,118 @@
+//! A uniform grid over cache records for "which records lie within r of x" (the flat
+//! grid in place of Ward et al.'s octree). Every record reaches the same distance r (a·D), so
+//! cells at least r wide put every record within r of x in the at most 2 × 2 × 2 cells the
+//! cube [x − r, x + r] overlaps: a query reads those cells' records and nothing else.
+//!
+//! The grid spans the scene's first bounds, at most [`MAX_CELLS`] cells per axis; a point
+//! outside falls into the nearest border cell. Clamping is monotone, so a record within r of x
+//! still lies in a cell the query's (clamped) range covers. Units: scene units.
+use glam::Vec3;
+
+/// Most cells per axis: a tiny radius gives wider cells, never a huge grid.
+pub const MAX_CELLS: f32 = 32.0;
+/// Bytes of the empty grid at most (one vector header per cell).
+pub const MAX_EMPTY_BYTES: u64 = (MAX_CELLS * MAX_CELLS * MAX_CELLS) as u64 * std::mem::size_of::<Vec<u8>>() as u64;
+
+/// Items of type `T` (kept inline, so a query reads them without chasing indices) by position.
+#[derive(Clone, Debug)]
+pub struct RecordGrid<T> {
+    lo: Vec3,
+    cell: Vec3,
+    dims: [i32; 3],
+    cells: Vec<Vec<T>>,
+}
+
+impl<T: Copy> RecordGrid<T> {
+    /// An empty grid over the box `(lo, hi)` for query radius `r`.
+    pub fn new(lo: Vec3, hi: Vec3, r: f32) -> RecordGrid<T> {
+        let size = (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
+        // Rounded down, so cells are at least r wide (one cell on an axis shorter than r).
+        let dims = (size / r.max(f32::MIN_POSITIVE)).floor().clamp(Vec3::ONE, Vec3::splat(MAX_CELLS));
+        let cell = size / dims;
+        let dims = [dims.x as i32, dims.y as i32, dims.z as i32];
+        RecordGrid { lo, cell, dims, cells: vec![Vec::new(); (dims[0] * dims[1] * dims[2]) as usize] }
+    }
+
+    pub fn clear(&mut self) {
+        self.cells.iter_mut().for_each(Vec::clear);
+    }
+
+    fn cell_of(&self, p: Vec3) -> [i32; 3] {
+        let c = (p - self.lo) / self.cell;
+        let clamp = |v: f32, n: i32| (v.floor().clamp(0.0, (n - 1) as f32)) as i32;
+        [clamp(c.x, self.dims[0]), clamp(c.y, self.dims[1]), clamp(c.z, self.dims[2])]
+    }
+
+    fn index(&self, c: [i32; 3]) -> usize {
+        ((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]) as usize
+    }
+
+    /// Inserts `item` at `p`.
+    pub fn insert(&mut self, item: T, p: Vec3) {
+        let i = self.index(self.cell_of(p));
+        self.cells[i].push(item);
+    }
+
+    /// Calls `f` with every item whose position may lie within `r` of `p` (a superset; the
+    /// caller tests the distance) until `f` returns false. Returns false if it was stopped.
+    pub fn query(&self, p: Vec3, r: f32, mut f: impl FnMut(&T) -> bool) -> bool {
+        let (lo, hi) = (self.cell_of(p - Vec3::splat(r)), self.cell_of(p + Vec3::splat(r)));
+        for z in lo[2]..=hi[2] {
+            for y in lo[1]..=hi[1] {
+                for x in lo[0]..=hi[0] {
+                    if !self.cells[self.index([x, y, z])].iter().all(&mut f) {
+                        return false;
+                    }
+                }
+            }
+        }
+        true
+    }
+
+    pub fn memory_bytes(&self) -> u64 {
+        let items: usize = self.cells.iter().map(|c| c.capacity() * std::mem::size_of::<T>()).sum();
+        (self.cells.len() * std::mem::size_of::<Vec<T>>() + items) as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Queries return a superset of the brute-force answer, also for records and queries
+    /// outside the grid's bounds (clamped into its border cells).
+    #[test]
+    fn queries_agree_with_brute_force_on_random_records() {
+        let mut rng = crate::core::Rng::new(7, 8);
+        let mut v = || rng.next_f32() * 20.0 - 10.0;
+        let r = 0.7;
+        let points: Vec<Vec3> = (0..3000).map(|_| Vec3::new(v(), v(), v())).collect();
+        let mut grid = RecordGrid::new(Vec3::splat(-8.0), Vec3::splat(8.0), r);
+        for (i, p) in points.iter().enumerate() {
+            grid.insert(i as u32, *p);
+        }
+        let mut all = 0;
+        grid.query(Vec3::ZERO, 1e9, |_: &u32| {
+            all += 1;
+            true
+        });
+        assert_eq!(all, points.len(), "every record is reachable");
+        let mut outside = 0;
+        for _ in 0..500 {
+            let q = Vec3::new(v(), v(), v());
+            outside += usize::from(q.abs().max_element() > 8.0);
+            let mut found: Vec<u32> = Vec::new();
+            grid.query(q, r, |&i| {
+                if (points[i as usize] - q).length() <= r {
+                    found.push(i)
+                }
+                true
+            });
+            found.sort_unstable();
+            let brute: Vec<u32> =
+                (0..points.len() as u32).filter(|&i| (points[i as usize] - q).length() <= r).collect();
+            assert_eq!(found, brute, "query at {q:?}");
+        }
+        assert!(outside > 50, "too few queries outside the grid: {outside}");
+    }
+}
