@@ -5,7 +5,8 @@
 //!
 //! The grid spans the scene's first bounds, at most [`MAX_CELLS`] cells per axis; a point
 //! outside falls into the nearest border cell. Clamping is monotone, so a record within r of x
-//! still lies in a cell the query's (clamped) range covers. Units: scene units.
+//! still lies in a cell the query's (clamped) range covers. The same cells ([`Cells`]) mark
+//! where a tick's new records reach (`pixels.rs`). Units: scene units.
 use glam::Vec3;
 
 /// Most cells per axis: a tiny radius gives wider cells, never a huge grid.
@@ -13,54 +14,72 @@ pub const MAX_CELLS: f32 = 32.0;
 /// Bytes of the empty grid at most (one vector header per cell).
 pub const MAX_EMPTY_BYTES: u64 = (MAX_CELLS * MAX_CELLS * MAX_CELLS) as u64 * std::mem::size_of::<Vec<u8>>() as u64;
 
-/// Items of type `T` (kept inline, so a query reads them without chasing indices) by position.
+/// A uniform division of a box into cells at least a given width (at most [`MAX_CELLS`] per
+/// axis), with points outside clamped into the border cells.
 #[derive(Clone, Debug)]
-pub struct RecordGrid<T> {
+pub struct Cells {
     lo: Vec3,
     cell: Vec3,
-    dims: [i32; 3],
-    cells: Vec<Vec<T>>,
+    pub dims: [i32; 3],
 }
 
-impl<T: Copy> RecordGrid<T> {
-    /// An empty grid over the box `(lo, hi)` for query radius `r`.
-    pub fn new(lo: Vec3, hi: Vec3, r: f32) -> RecordGrid<T> {
+impl Cells {
+    /// Cells over the box `(lo, hi)`, each at least `width` wide (one cell on an axis shorter).
+    pub fn new(lo: Vec3, hi: Vec3, width: f32) -> Cells {
         let size = (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
-        // Rounded down, so cells are at least r wide (one cell on an axis shorter than r).
-        let dims = (size / r.max(f32::MIN_POSITIVE)).floor().clamp(Vec3::ONE, Vec3::splat(MAX_CELLS));
-        let cell = size / dims;
-        let dims = [dims.x as i32, dims.y as i32, dims.z as i32];
-        RecordGrid { lo, cell, dims, cells: vec![Vec::new(); (dims[0] * dims[1] * dims[2]) as usize] }
+        // Rounded down, so cells are at least `width` wide.
+        let dims = (size / width.max(f32::MIN_POSITIVE)).floor().clamp(Vec3::ONE, Vec3::splat(MAX_CELLS));
+        Cells { lo, cell: size / dims, dims: [dims.x as i32, dims.y as i32, dims.z as i32] }
     }
 
-    pub fn clear(&mut self) {
-        self.cells.iter_mut().for_each(Vec::clear);
+    pub fn len(&self) -> usize {
+        (self.dims[0] * self.dims[1] * self.dims[2]) as usize
     }
 
-    fn cell_of(&self, p: Vec3) -> [i32; 3] {
+    /// The cell of `p`, clamped into the grid (monotone in each coordinate).
+    pub fn cell_of(&self, p: Vec3) -> [i32; 3] {
         let c = (p - self.lo) / self.cell;
         let clamp = |v: f32, n: i32| (v.floor().clamp(0.0, (n - 1) as f32)) as i32;
         [clamp(c.x, self.dims[0]), clamp(c.y, self.dims[1]), clamp(c.z, self.dims[2])]
     }
 
-    fn index(&self, c: [i32; 3]) -> usize {
+    pub fn index(&self, c: [i32; 3]) -> usize {
         ((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]) as usize
+    }
+}
+
+/// Items of type `T` (kept inline, so a query reads them without chasing indices) by position.
+#[derive(Clone, Debug)]
+pub struct RecordGrid<T> {
+    cells: Cells,
+    items: Vec<Vec<T>>,
+}
+
+impl<T: Copy> RecordGrid<T> {
+    /// An empty grid over the box `(lo, hi)` for query radius `r`.
+    pub fn new(lo: Vec3, hi: Vec3, r: f32) -> RecordGrid<T> {
+        let cells = Cells::new(lo, hi, r);
+        RecordGrid { items: vec![Vec::new(); cells.len()], cells }
+    }
+
+    pub fn clear(&mut self) {
+        self.items.iter_mut().for_each(Vec::clear);
     }
 
     /// Inserts `item` at `p`.
     pub fn insert(&mut self, item: T, p: Vec3) {
-        let i = self.index(self.cell_of(p));
-        self.cells[i].push(item);
+        let i = self.cells.index(self.cells.cell_of(p));
+        self.items[i].push(item);
     }
 
     /// Calls `f` with every item whose position may lie within `r` of `p` (a superset; the
     /// caller tests the distance) until `f` returns false. Returns false if it was stopped.
     pub fn query(&self, p: Vec3, r: f32, mut f: impl FnMut(&T) -> bool) -> bool {
-        let (lo, hi) = (self.cell_of(p - Vec3::splat(r)), self.cell_of(p + Vec3::splat(r)));
+        let (lo, hi) = (self.cells.cell_of(p - Vec3::splat(r)), self.cells.cell_of(p + Vec3::splat(r)));
         for z in lo[2]..=hi[2] {
             for y in lo[1]..=hi[1] {
                 for x in lo[0]..=hi[0] {
-                    if !self.cells[self.index([x, y, z])].iter().all(&mut f) {
+                    if !self.items[self.cells.index([x, y, z])].iter().all(&mut f) {
                         return false;
                     }
                 }
@@ -70,8 +89,8 @@ impl<T: Copy> RecordGrid<T> {
     }
 
     pub fn memory_bytes(&self) -> u64 {
-        let items: usize = self.cells.iter().map(|c| c.capacity() * std::mem::size_of::<T>()).sum();
-        (self.cells.len() * std::mem::size_of::<Vec<T>>() + items) as u64
+        let items: usize = self.items.iter().map(|c| c.capacity() * std::mem::size_of::<T>()).sum();
+        (self.items.len() * std::mem::size_of::<Vec<T>>() + items) as u64
     }
 }
 

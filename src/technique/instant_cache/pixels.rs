@@ -15,6 +15,7 @@
 //! Invariant (audited with `audit: true`, stat `audit_samples_mismatched`): every sample's list
 //! equals, bit for bit, what a fresh lookup of the cache gives at its hit.
 use super::cache::{Cache, Record, GONE};
+use super::grid::Cells;
 use crate::core::Rgb;
 use crate::technique::camera_chain::CameraSample;
 use glam::Vec3;
@@ -100,47 +101,31 @@ pub fn keep_or_look_up(
         .collect()
 }
 
-/// The cells a tick's new records may reach: a grid over the scene's first extent with cells
-/// at least the records' reach wide (at most 64 per axis); points outside it fall into the
-/// border cells, which keeps the test conservative.
+/// The cells a tick's new records may reach: [`Cells`] over the scene's first extent, at least
+/// the records' reach wide; points outside it fall into the border cells, which keeps the test
+/// conservative.
 pub struct NewRecords {
-    lo: Vec3,
-    cell: Vec3,
-    dims: [i32; 3],
+    cells: Cells,
     marked: Vec<bool>,
     pub count: u64,
 }
 
 impl NewRecords {
     pub fn new(lo: Vec3, hi: Vec3, reach: f32) -> NewRecords {
-        let size = (hi - lo).max(Vec3::splat(f32::MIN_POSITIVE));
-        // Rounded down, so cells are at least `reach` wide (one cell on an axis shorter than it).
-        let dims = (size / reach.max(f32::MIN_POSITIVE)).floor().clamp(Vec3::ONE, Vec3::splat(64.0));
-        let cell = size / dims;
-        let dims = [dims.x as i32, dims.y as i32, dims.z as i32];
-        NewRecords { lo, cell, dims, marked: vec![false; (dims[0] * dims[1] * dims[2]) as usize], count: 0 }
-    }
-
-    fn cell_of(&self, p: Vec3) -> [i32; 3] {
-        let c = ((p - self.lo) / self.cell).floor();
-        let clamp = |v: f32, n: i32| (v.max(-1.0).min(n as f32) as i32).clamp(0, n - 1);
-        [clamp(c.x, self.dims[0]), clamp(c.y, self.dims[1]), clamp(c.z, self.dims[2])]
-    }
-
-    fn index(&self, c: [i32; 3]) -> usize {
-        ((c[2] * self.dims[1] + c[1]) * self.dims[0] + c[0]) as usize
+        let cells = Cells::new(lo, hi, reach);
+        NewRecords { marked: vec![false; cells.len()], cells, count: 0 }
     }
 
     /// Marks the cells a record at `p` may reach.
     fn mark(&mut self, p: Vec3) {
         self.count += 1;
-        let c = self.cell_of(p);
+        let c = self.cells.cell_of(p);
         for dz in -1..=1 {
             for dy in -1..=1 {
                 for dx in -1..=1 {
                     let n = [c[0] + dx, c[1] + dy, c[2] + dz];
-                    if n.iter().zip(&self.dims).all(|(&v, &d)| (0..d).contains(&v)) {
-                        let i = self.index(n);
+                    if n.iter().zip(&self.cells.dims).all(|(&v, &d)| (0..d).contains(&v)) {
+                        let i = self.cells.index(n);
                         self.marked[i] = true;
                     }
                 }
@@ -150,7 +135,7 @@ impl NewRecords {
 
     /// May a record made this tick reach `p`?
     pub fn near(&self, p: Vec3) -> bool {
-        self.count > 0 && self.marked[self.index(self.cell_of(p))]
+        self.count > 0 && self.marked[self.cells.index(self.cells.cell_of(p))]
     }
 }
 
