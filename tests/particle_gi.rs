@@ -84,6 +84,24 @@ fn room() -> Scene {
     slab_room([0.0, 1.0, -2.5], [0.0, 0.6, 1.0], [-0.5, 0.5, 0.5], SLAB_SCALE, [0.0, 1.7, 0.3])
 }
 
+/// [`room`] with a dynamic mirror pane standing at `PANE_X`: links that hit it end on no
+/// particle, so only their hit distance says they met a moved surface.
+fn room_with_pane() -> Scene {
+    let mut json = slab_room_json([0.0, 1.0, -2.5], [0.0, 0.6, 1.0], [-0.5, 0.5, 0.5], SLAB_SCALE, [0.0, 1.7, 0.3]);
+    json["materials"]["mirror"] = serde_json::json!({"type": "mirror", "reflectance": [0.9, 0.9, 0.9]});
+    let objects = json["objects"].as_array_mut().expect("objects");
+    objects.push(serde_json::json!({"name": "pane", "shape": {"type": "quad"}, "material": "mirror", "dynamic": true,
+        "transform": {"translation": [PANE_X, 0.5, 0.9], "rotation": FACE_BACK, "scale": [0.3, 0.5, 1]}}));
+    scene_from_json(json)
+}
+
+const PANE_X: f32 = 0.9;
+
+fn move_pane(dx: f32) -> Edit {
+    let transform = Trs { translation: [PANE_X + dx, 0.5, 0.9], rotation: FACE_BACK, scale: [0.3, 0.5, 1.0] };
+    Edit::Object { name: "pane".into(), transform }
+}
+
 /// The slab at `x`, its width and depth scaled by `k`.
 fn scale_slab(x: f32, k: f32) -> Edit {
     let scale = [SLAB_SCALE[0] * k, SLAB_SCALE[1], SLAB_SCALE[2] * k];
@@ -93,17 +111,19 @@ fn scale_slab(x: f32, k: f32) -> Edit {
 
 #[test]
 fn the_incremental_link_update_equals_a_full_rebuild() {
-    // Property: moving the slab, and then scaling it, and updating links incrementally gives,
-    // tick by tick, the image a full rebuild of every link gives with the same seed, bit for
-    // bit, while tracing a fraction of the links: a change of scale within the layout's
-    // hysteresis rescales the slab's particles in place (same indices, the areas a rebuild
-    // computes), re-tessellates the slab alone and retraces only links that may touch it.
+    // Property: moving the slab and a mirror pane, and then scaling the slab, and updating
+    // links incrementally gives, tick by tick, the image a full rebuild of every link gives
+    // with the same seed, bit for bit, while tracing a fraction of the links: a change of scale
+    // within the layout's hysteresis rescales the slab's particles in place (same indices, the
+    // areas a rebuild computes), re-tessellates the slab alone and retraces only links that may
+    // touch it. Links that ended on the pane must be traced again in full, and links that may
+    // newly meet either object only up to their old hit.
     let device = Device::new(2).unwrap();
     let pool = thread_pool(2).unwrap();
     pool.install(|| {
         let make = |incremental| {
             let c = ParticleGiConfig { incremental, ..config(8_000) };
-            Session::new(room(), &TechniqueConfig::ParticleGi(c), 7, &device).expect("session")
+            Session::new(room_with_pane(), &TechniqueConfig::ParticleGi(c), 7, &device).expect("session")
         };
         let (mut inc, mut full) = (make(true), make(false));
         let first = stats(&inc.tick().unwrap());
@@ -111,8 +131,9 @@ fn the_incremental_link_update_equals_a_full_rebuild() {
         for (step, (x, k)) in
             [(0.0f32, 1.0f32), (0.4, 1.0), (-0.2, 1.0), (-0.2, 1.3), (0.1, 0.8)].into_iter().enumerate()
         {
-            inc.queue_edits(vec![scale_slab(x, k)]).unwrap();
-            full.queue_edits(vec![scale_slab(x, k)]).unwrap();
+            let edits = || vec![scale_slab(x, k), move_pane(0.3 * x)];
+            inc.queue_edits(edits()).unwrap();
+            full.queue_edits(edits()).unwrap();
             let (a, b) = (inc.tick().unwrap(), full.tick().unwrap());
             let (sa, sb) = (stats(&a), stats(&b));
             eprintln!(

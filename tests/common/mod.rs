@@ -253,7 +253,18 @@ pub const FACE_LEFT: [f32; 4] = [0.0, -std::f32::consts::FRAC_1_SQRT_2, 0.0, std
 /// a dynamic white box "slab" at `slab` scaled by `slab_scale`, seen from `camera` towards
 /// `look_at` at 24 × 24.
 pub fn slab_room(camera: [f32; 3], look_at: [f32; 3], slab: [f32; 3], slab_scale: [f32; 3], lamp: [f32; 3]) -> Scene {
-    scene_from_json(serde_json::json!({
+    scene_from_json(slab_room_json(camera, look_at, slab, slab_scale, lamp))
+}
+
+/// The JSON of [`slab_room`], for tests that add to it.
+pub fn slab_room_json(
+    camera: [f32; 3],
+    look_at: [f32; 3],
+    slab: [f32; 3],
+    slab_scale: [f32; 3],
+    lamp: [f32; 3],
+) -> serde_json::Value {
+    serde_json::json!({
         "camera": {"position": camera, "look_at": look_at, "vfov_deg": 40, "resolution": [24, 24]},
         "materials": {
             "white": {"type": "diffuse", "reflectance": [0.8, 0.8, 0.8]},
@@ -275,5 +286,5 @@ pub fn slab_room(camera: [f32; 3], look_at: [f32; 3], slab: [f32; 3], slab_scale
         ],
         "lights": [{"name": "lamp", "dynamic": true, "emitter": {"type": "point", "intensity": [4, 4, 4]},
                     "transform": {"translation": lamp}}]
-    }))
+    })
 }

@@ -1,7 +1,7 @@
 //! `particle_gi`'s configuration (validated as the service receives it) and its per-tick
 //! figures, laid out like Chang et al.'s Tables 1 and 2. Lengths are fractions of the particle
 //! spacing √ΔA unless stated; times in milliseconds; memory in bytes.
-use super::{grid, lighting, particles};
+use super::{grid, lighting, links, particles};
 use crate::scene::Scene;
 use crate::technique::budget::{product_sum, MemoryEstimate};
 use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription};
@@ -109,7 +109,7 @@ impl ParticleGiConfig {
                 (particles, particles::BYTES_PER_PARTICLE + grid::BYTES_PER_PARTICLE),
                 (2 * scene.objects.len() as u64, grid::BYTES_PER_GRID),
                 (particles / 2, particles::SAMPLING_BYTES_PER_POINT),
-                (particles * links_each, 4 + 2 + 8),
+                (particles * links_each, links::BYTES_PER_LINK + links::TRACING_BYTES_PER_LINK),
                 (particles * shares, 2 * RGB_BYTES),
                 (2 * particles, shares * RGB_BYTES + 2),
             ],

@@ -8,9 +8,9 @@
 //! [`NON_DIFFUSE`] (this method carries diffuse transport only). The end particle is the
 //! nearest one of the hit object on the side the hit triangle turns towards the ray (that
 //! side's grid, and a normal facing the ray), never one on another object, so moving one
-//! object cannot change where a link to a static surface ends. Each link also keeps its hit
-//! distance, rounded up to 1/65 534 of the scene diagonal (u16::MAX: none), for the
-//! incremental update's box tests.
+//! object cannot change where a link to a static surface ends. Each link also keeps its exact
+//! hit distance (infinite: none), for the incremental update: its box tests, and the bounded
+//! retrace that confirms a link whose segment only nears a moved surface.
 //!
 //! Beyond the paper, a set can be built lazily: a particle's links are traced the first time
 //! they are asked for ([`LinkSet::ensure`]) and stored in the order asked, behind a slot per
@@ -32,6 +32,7 @@ use crate::embree::Ray;
 use crate::scene::edits::Aabb;
 use crate::scene::{Scene, SceneAccel, SurfaceId};
 use crate::technique::box_tree::BoxTree;
+use crate::technique::RenderContext;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 
@@ -41,7 +42,11 @@ pub const NOWHERE: u32 = u32::MAX;
 pub const NON_DIFFUSE: u32 = u32::MAX - 1;
 /// Shells of grid cells searched for a hit's nearest particle.
 const NEAREST_RINGS: i32 = 2;
-const NO_DISTANCE: u16 = u16::MAX;
+
+/// Bytes a link holds: its end and its hit distance.
+pub const BYTES_PER_LINK: u64 = 8;
+/// Bytes per link while a batch of links is traced.
+pub const TRACING_BYTES_PER_LINK: u64 = std::mem::size_of::<Traced>() as u64;
 
 /// A particle whose links are not built.
 const UNBUILT: u32 = u32::MAX;
@@ -60,15 +65,43 @@ pub struct LinkSet {
     free: Vec<u32>,
     /// End particle of link k of the particle in slot s at `s · n² + k`.
     ends: Vec<u32>,
-    distance: Vec<u16>,
-    /// Metres per distance step.
-    step: f32,
+    /// Hit distance of each link (infinite: it hit nothing).
+    distance: Vec<f32>,
 }
 
 /// What tracing a link found.
 struct Traced {
     end: u32,
-    distance: u16,
+    distance: f32,
+}
+
+/// A link that hit nothing.
+const MISSED: Traced = Traced { end: NOWHERE, distance: f32::INFINITY };
+
+/// What links are traced against: the scene, its accel, the particles and their grids.
+#[derive(Clone, Copy)]
+pub struct Target<'a> {
+    pub scene: &'a Scene,
+    pub accel: &'a SceneAccel,
+    pub particles: &'a AreaParticles,
+    pub grids: &'a ObjectGrids,
+}
+
+impl<'a> Target<'a> {
+    pub fn new(ctx: &RenderContext<'a>, particles: &'a AreaParticles, grids: &'a ObjectGrids) -> Target<'a> {
+        Target { scene: ctx.scene, accel: ctx.accel, particles, grids }
+    }
+}
+
+/// The surfaces that moved this tick, for [`LinkSet::update`].
+pub struct Moves<'a> {
+    /// Per object: did it move (or change scale)?
+    pub moved: &'a [bool],
+    /// Every moved surface's old and new bounds, widened.
+    pub boxes: &'a [Aabb],
+    /// The old bounds alone, and the new bounds alone.
+    pub old: BoxTree,
+    pub new: BoxTree,
 }
 
 impl LinkSet {
@@ -82,10 +115,9 @@ impl LinkSet {
     }
 
     /// A set with no links built yet, for `particles` particles.
-    pub fn empty(n: u32, salt: u64, diagonal: f32, particles: usize) -> LinkSet {
+    pub fn empty(n: u32, salt: u64, particles: usize) -> LinkSet {
         let slot = vec![UNBUILT; particles];
-        let step = diagonal / 65_534.0;
-        LinkSet { n, salt, slot, owner: Vec::new(), free: Vec::new(), ends: Vec::new(), distance: Vec::new(), step }
+        LinkSet { n, salt, slot, owner: Vec::new(), free: Vec::new(), ends: Vec::new(), distance: Vec::new() }
     }
 
     /// The end particles of particle `i`'s links (empty if they are not built).
@@ -101,27 +133,18 @@ impl LinkSet {
 
     /// Builds the links of the particles of `wanted` that have none, in that order. Returns
     /// the rays traced.
-    pub fn ensure(
-        &mut self,
-        scene: &Scene,
-        accel: &SceneAccel,
-        particles: &AreaParticles,
-        grids: &ObjectGrids,
-        wanted: impl Iterator<Item = u32>,
-    ) -> u64 {
+    pub fn ensure(&mut self, target: Target, wanted: impl Iterator<Item = u32>) -> u64 {
         let new: Vec<u32> = wanted.filter(|&i| self.slot[i as usize] == UNBUILT).collect();
         let per = self.per_particle();
         let this = &*self;
-        let traced: Vec<Traced> = (0..new.len() * per)
-            .into_par_iter()
-            .map(|l| this.trace(scene, accel, particles, grids, new[l / per] as usize, l % per))
-            .collect();
+        let traced: Vec<Traced> =
+            (0..new.len() * per).into_par_iter().map(|l| this.trace(target, new[l / per] as usize, l % per)).collect();
         for (&i, traced) in new.iter().zip(traced.chunks_exact(per)) {
             let s = match self.free.pop() {
                 Some(s) => s,
                 None => {
                     self.ends.resize(self.ends.len() + per, NOWHERE);
-                    self.distance.resize(self.distance.len() + per, NO_DISTANCE);
+                    self.distance.resize(self.distance.len() + per, f32::INFINITY);
                     self.owner.push(UNBUILT);
                     (self.owner.len() - 1) as u32
                 }
@@ -136,20 +159,13 @@ impl LinkSet {
 
     /// Builds the links of every particle reachable from `from` through the set's links (the
     /// particles a walk from them may visit), round by round. Returns the rays traced.
-    pub fn ensure_reached(
-        &mut self,
-        scene: &Scene,
-        accel: &SceneAccel,
-        particles: &AreaParticles,
-        grids: &ObjectGrids,
-        from: &[u32],
-    ) -> u64 {
+    pub fn ensure_reached(&mut self, target: Target, from: &[u32]) -> u64 {
         let mut seen = vec![false; self.slot.len()];
         let mut frontier: Vec<u32> =
             from.iter().copied().filter(|&i| !std::mem::replace(&mut seen[i as usize], true)).collect();
         let mut traced = 0;
         while !frontier.is_empty() {
-            traced += self.ensure(scene, accel, particles, grids, frontier.iter().copied());
+            traced += self.ensure(target, frontier.iter().copied());
             let ends = frontier.iter().flat_map(|&i| self.ends_of(i as usize).iter().copied());
             frontier = ends.filter(|&e| e < NON_DIFFUSE && !std::mem::replace(&mut seen[e as usize], true)).collect();
         }
@@ -182,18 +198,22 @@ impl LinkSet {
         Ray::new(offset_ray_origin(particles.position[i], particles.normal[i]), self.direction(&frame, i, k))
     }
 
-    fn trace(
-        &self,
-        scene: &Scene,
-        accel: &SceneAccel,
-        particles: &AreaParticles,
-        grids: &ObjectGrids,
-        i: usize,
-        k: usize,
-    ) -> Traced {
-        let ray = self.ray(particles, i, k);
-        let Some(hit) = accel.scene().intersect1(&ray) else { return Traced { end: NOWHERE, distance: NO_DISTANCE } };
-        let distance = ((hit.t / self.step).ceil() as u32 + 1).min(NO_DISTANCE as u32 - 1) as u16;
+    fn trace(&self, target: Target, i: usize, k: usize) -> Traced {
+        self.trace_before(target, i, k, f32::INFINITY).unwrap_or(MISSED)
+    }
+
+    /// Traces link `k` of particle `i` for hits closer than `before` (`None`: there are none).
+    fn trace_before(&self, target: Target, i: usize, k: usize, before: f32) -> Option<Traced> {
+        let Target { scene, accel, particles, grids } = target;
+        let mut ray = self.ray(particles, i, k);
+        if before.is_finite() {
+            if before <= 0.0 {
+                return None;
+            }
+            // The greatest float below `before` (a positive, finite float's bits are ordered).
+            ray.tfar = f32::from_bits(before.to_bits() - 1);
+        }
+        let hit = accel.scene().intersect1(&ray)?;
         let end = match accel.resolve(&hit) {
             Some((SurfaceId::Object(object), triangle)) => {
                 if scene.materials[scene.objects[object as usize].material as usize].is_specular() {
@@ -210,90 +230,99 @@ impl LinkSet {
             }
             _ => NOWHERE,
         };
-        Traced { end, distance }
+        Some(Traced { end, distance: hit.t })
     }
 
-    /// Retraces the links that may have changed after surfaces moved: those of particles on a
-    /// moved object (`moved[object]`), those ending on one, and those whose segment touches a
-    /// moved surface's old or new bounds (`boxes`, also as `tree`). A particle with every box
-    /// behind its tangent plane is skipped whole: its links leave into its hemisphere; a link
-    /// whose (rounded-up) length falls short of the nearest box is skipped untested. Returns
-    /// the links retraced and box tests.
-    pub fn update(
-        &mut self,
-        scene: &Scene,
-        accel: &SceneAccel,
-        particles: &AreaParticles,
-        grids: &ObjectGrids,
-        moved: &[bool],
-        boxes: &[Aabb],
-        tree: &BoxTree,
-    ) -> (u64, u64) {
+    /// Retraces the links that may have changed after surfaces moved. A link of a particle on a
+    /// moved object, one ending on a moved object, and one whose hit lies in a moved surface's
+    /// old bounds (it may have hit that surface) are traced again in full. Any other link hit
+    /// no moved surface, so it changes only if a moved surface now lies in front of its hit:
+    /// if its segment touches a new bound, it is traced again up to its old hit, and kept when
+    /// nothing is found before. Either way it ends as a full rebuild's would. A particle with
+    /// every box behind its tangent plane is skipped whole (its links leave into its
+    /// hemisphere), and a link shorter than the way to the nearest box is skipped untested.
+    /// Returns the links retraced and box tests.
+    pub fn update(&mut self, target: Target, moves: &Moves) -> (u64, u64) {
         let per = self.per_particle();
-        let on_moved = |i: u32| moved[particles.object[i as usize] as usize];
         let this = &*self;
-        // Per particle: its frame once, then each link's segment against the boxes.
-        let checked: Vec<(Vec<usize>, u64)> = (0..this.owner.len())
-            .into_par_iter()
-            .map(|s| {
-                let i = this.owner[s] as usize;
-                let links = s * per..(s + 1) * per;
-                if i == UNBUILT as usize {
-                    return (Vec::new(), 0);
-                }
-                if on_moved(i as u32) {
-                    return (links.collect(), 0);
-                }
-                let (p, n) = (particles.position[i], particles.normal[i]);
-                let origin = offset_ray_origin(p, n);
-                let in_front = |b: &Aabb| {
-                    let (centre, half) = ((b.min + b.max) * 0.5, (b.max - b.min) * 0.5);
-                    n.dot(centre - p) + n.abs().dot(half) >= 0.0
-                };
-                if !boxes.iter().any(in_front) {
-                    return (Vec::new(), boxes.len() as u64);
-                }
-                let frame = ShadingFrame::from_normal(n);
-                // A link shorter than the way to the nearest box cannot touch one.
-                let reach = boxes.iter().map(|b| (b.min - origin).max(origin - b.max).max(Vec3::ZERO).length());
-                let reach = reach.fold(f32::INFINITY, f32::min);
-                let (mut stale, mut tests) = (Vec::new(), 0u64);
-                for l in links {
-                    let end = this.ends[l];
-                    if end < NON_DIFFUSE && on_moved(end) {
-                        stale.push(l);
-                        continue;
-                    }
-                    let t = match this.distance[l] {
-                        NO_DISTANCE => f32::INFINITY,
-                        d => d as f32 * this.step,
-                    };
-                    if t < reach {
-                        continue;
-                    }
-                    let (touches, count) = tree.hits(origin, this.direction(&frame, i, l % per), t);
-                    tests += count;
-                    if touches {
-                        stale.push(l);
-                    }
-                }
-                (stale, tests)
-            })
-            .collect();
+        let checked: Vec<(Vec<(usize, f32)>, u64)> =
+            (0..this.owner.len()).into_par_iter().map(|s| this.stale_links(target.particles, moves, s)).collect();
         let tests: u64 = checked.iter().map(|c| c.1).sum();
-        let stale: Vec<usize> = checked.into_iter().flat_map(|c| c.0).collect();
+        let stale: Vec<(usize, f32)> = checked.into_iter().flat_map(|c| c.0).collect();
         let retraced: Vec<(usize, Traced)> = stale
             .par_iter()
-            .map(|&l| (l, this.trace(scene, accel, particles, grids, this.owner[l / per] as usize, l % per)))
+            .filter_map(|&(l, before)| {
+                let i = this.owner[l / per] as usize;
+                let traced = this.trace_before(target, i, l % per, before);
+                match (traced, before.is_finite()) {
+                    (Some(t), _) => Some((l, t)),
+                    (None, true) => None,
+                    (None, false) => Some((l, MISSED)),
+                }
+            })
             .collect();
         for (l, t) in &retraced {
             self.ends[*l] = t.end;
             self.distance[*l] = t.distance;
         }
-        (retraced.len() as u64, tests)
+        (stale.len() as u64, tests)
+    }
+
+    /// The links of the particle in slot `s` to trace again, each with the distance before
+    /// which to look (infinite: a full retrace); and the box tests made.
+    fn stale_links(&self, particles: &AreaParticles, moves: &Moves, s: usize) -> (Vec<(usize, f32)>, u64) {
+        let per = self.per_particle();
+        let on_moved = |i: u32| moves.moved[particles.object[i as usize] as usize];
+        let i = self.owner[s] as usize;
+        let links = s * per..(s + 1) * per;
+        if i == UNBUILT as usize {
+            return (Vec::new(), 0);
+        }
+        if on_moved(i as u32) {
+            return (links.map(|l| (l, f32::INFINITY)).collect(), 0);
+        }
+        let (p, n) = (particles.position[i], particles.normal[i]);
+        let origin = offset_ray_origin(p, n);
+        let in_front = |b: &Aabb| {
+            let (centre, half) = ((b.min + b.max) * 0.5, (b.max - b.min) * 0.5);
+            n.dot(centre - p) + n.abs().dot(half) >= 0.0
+        };
+        if !moves.boxes.iter().any(in_front) {
+            return (Vec::new(), moves.boxes.len() as u64);
+        }
+        let frame = ShadingFrame::from_normal(n);
+        // A link shorter than the way to the nearest box cannot touch one.
+        let reach = moves.boxes.iter().map(|b| (b.min - origin).max(origin - b.max).max(Vec3::ZERO).length());
+        let reach = reach.fold(f32::INFINITY, f32::min);
+        let (mut stale, mut tests) = (Vec::new(), 0u64);
+        for l in links {
+            let (end, t) = (self.ends[l], self.distance[l]);
+            if end < NON_DIFFUSE && on_moved(end) {
+                stale.push((l, f32::INFINITY));
+                continue;
+            }
+            if t < reach {
+                continue;
+            }
+            let dir = self.direction(&frame, i, l % per);
+            if t.is_finite() {
+                let (was_on, count) = moves.old.hits(origin + dir * t, dir, 0.0);
+                tests += count;
+                if was_on {
+                    stale.push((l, f32::INFINITY));
+                    continue;
+                }
+            }
+            let (touches, count) = moves.new.hits(origin, dir, t);
+            tests += count;
+            if touches {
+                stale.push((l, t));
+            }
+        }
+        (stale, tests)
     }
 
     pub fn memory_bytes(&self) -> u64 {
-        (self.ends.len() * 6 + (self.slot.len() + self.owner.len() + self.free.len()) * 4) as u64
+        self.ends.len() as u64 * BYTES_PER_LINK + ((self.slot.len() + self.owner.len() + self.free.len()) * 4) as u64
     }
 }

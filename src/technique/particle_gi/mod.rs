@@ -12,8 +12,9 @@
 //!    (`radiance.rs`, §3.2). When objects move, only links that may have changed are retraced
 //!    (beyond the paper, which rebuilt all links in seconds): those of particles on a moved object
 //!    (carried by its transform, not resampled; their gathering links are forgotten and traced
-//!    again when next gathered), those ending on one, and those whose segment touches a moved
-//!    surface's old or new bounds; only the moved objects' lookup grids are rebuilt. Only the
+//!    again when next gathered), those ending on one or with their hit in a moved surface's
+//!    old bounds, and, only up to their old hit, those whose segment touches a moved surface's
+//!    new bounds (kept if nothing lies before it); only the moved objects' grids are rebuilt. Only the
 //!    estimation lists on moved objects are dropped (a list holds its own object's particles).
 //!    A change of scale keeps every object's point count while each stays within a factor 2 of
 //!    its area's share (`particles::Layout`): the object's particles keep their indices and get
@@ -85,7 +86,7 @@ use gather::Estimates;
 use glam::Vec3;
 use grid::ObjectGrids;
 use lighting::{Inputs, Lighting, LightingWork};
-use links::LinkSet;
+use links::{LinkSet, Moves, Target};
 use particles::{AreaParticles, Layout};
 use radiance::{EstimationLists, RadianceKey, Tessellation};
 use rayon::prelude::*;
@@ -206,8 +207,8 @@ impl ParticleGi {
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length().max(f32::MIN_POSITIVE));
         // Scattering links are traced for the particles walks reach (`update_lighting`), and
         // gathering links when a particle is first gathered (`estimate_missing`).
-        let scatter = LinkSet::empty(c.scatter_links, c.seed ^ SCATTER_SALT, diagonal, particles.len());
-        let gather = LinkSet::empty(c.gather_links, c.seed ^ GATHER_SALT, diagonal, particles.len());
+        let scatter = LinkSet::empty(c.scatter_links, c.seed ^ SCATTER_SALT, particles.len());
+        let gather = LinkSet::empty(c.gather_links, c.seed ^ GATHER_SALT, particles.len());
         let tessellation = Tessellation::build(ctx.scene, c.subtriangle_edge * spacing);
         self.estimates = Estimates::new(&tessellation, lighting::share_count(ctx.scene.lights.len()));
         self.geometry = Some(Geometry {
@@ -251,13 +252,17 @@ impl ParticleGi {
             g.grids.rebuild(&g.particles, object);
         }
         let slack = BOX_SLACK * g.diagonal;
-        let boxes: Vec<Aabb> =
-            delta.moved.iter().flat_map(|m| [m.old_bounds, m.new_bounds]).map(|b| widened(&b, slack)).collect();
-        let tree = BoxTree::new(boxes.clone());
+        let bounds = |old: bool| -> Vec<Aabb> {
+            delta.moved.iter().map(|m| widened(if old { &m.old_bounds } else { &m.new_bounds }, slack)).collect()
+        };
+        let boxes: Vec<Aabb> = [bounds(true), bounds(false)].concat();
+        let moves =
+            Moves { moved: &moved, boxes: &boxes, old: BoxTree::new(bounds(true)), new: BoxTree::new(bounds(false)) };
         // A moved particle's gathering links are traced again only if it is gathered again.
         g.gather.forget(|i| moved[g.particles.object[i as usize] as usize]);
+        let target = Target::new(ctx, &g.particles, &g.grids);
         for set in [&mut g.scatter, &mut g.gather] {
-            let (traced, tests) = set.update(ctx.scene, ctx.accel, &g.particles, &g.grids, &moved, &boxes, &tree);
+            let (traced, tests) = set.update(target, &moves);
             self.pending.links_traced += traced;
             self.pending.link_box_tests += tests;
         }
@@ -306,7 +311,7 @@ impl ParticleGi {
         let emitted = lighting.emit(&inputs, &emit);
         let t = Instant::now();
         let lit = lighting.lit(&scatter);
-        let reached = g.scatter.ensure_reached(ctx.scene, ctx.accel, &g.particles, &g.grids, &lit);
+        let reached = g.scatter.ensure_reached(Target::new(ctx, &g.particles, &g.grids), &lit);
         let geometry_ms = t.elapsed().as_secs_f64() * 1e3;
         let work = lighting.scatter(&inputs, &g.scatter, &scatter);
         // Fresh estimates whose lists held are gathered again in place; the rest go.
@@ -461,7 +466,7 @@ impl ParticleGi {
         let (Some(g), Some(lighting)) = (self.geometry.as_mut(), self.lighting.as_ref()) else { return };
         let t = Instant::now();
         let wanted = gather::particles_to_gather(&g.lists, keys, g.particles.len());
-        let lazily = g.gather.ensure(ctx.scene, ctx.accel, &g.particles, &g.grids, wanted.iter().copied());
+        let lazily = g.gather.ensure(Target::new(ctx, &g.particles, &g.grids), wanted.iter().copied());
         self.pending.links_traced += lazily;
         self.pending.links_built_lazily += lazily;
         self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
