@@ -71,6 +71,7 @@ mod lighting;
 mod links;
 mod particles;
 mod radiance;
+mod strata;
 
 pub use config::{ParticleGiConfig, ParticleStats, MAX_PARTICLES};
 
@@ -256,8 +257,9 @@ impl ParticleGi {
             delta.moved.iter().map(|m| widened(if old { &m.old_bounds } else { &m.new_bounds }, slack)).collect()
         };
         let boxes: Vec<Aabb> = [bounds(true), bounds(false)].concat();
-        let moves =
-            Moves { moved: &moved, boxes: &boxes, old: BoxTree::new(bounds(true)), new: BoxTree::new(bounds(false)) };
+        let spans = delta.moved.iter().map(|m| widened(&m.old_bounds.union(&m.new_bounds), slack)).collect();
+        let (old, new) = (BoxTree::new(bounds(true)), BoxTree::new(bounds(false)));
+        let moves = Moves { moved: &moved, boxes: &boxes, spans, old, new };
         // A moved particle's gathering links are traced again only if it is gathered again.
         g.gather.forget(|i| moved[g.particles.object[i as usize] as usize]);
         let target = Target::new(ctx, &g.particles, &g.grids);
