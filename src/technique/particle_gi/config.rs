@@ -1,7 +1,7 @@
 //! `particle_gi`'s configuration (validated as the service receives it) and its per-tick
 //! figures, laid out like Chang et al.'s Tables 1 and 2. Lengths are fractions of the particle
 //! spacing √ΔA unless stated; times in milliseconds; memory in bytes.
-use super::{grid, lighting, links, particles};
+use super::{grid, lighting, links, particles, radiance};
 use crate::scene::Scene;
 use crate::technique::budget::{product_sum, MemoryEstimate};
 use crate::technique::registry::{Parameter, ParameterKind, TechniqueDescription};
@@ -89,8 +89,8 @@ impl ParticleGiConfig {
     /// there with their grids (two per object), their area estimation's temporary samples, both link
     /// sets (an end and a distance per link, plus what tracing them holds while building), the field's
     /// direct flux and radiance per lighting share, and the estimate cache (about one radiance particle
-    /// per area particle at the default subtriangle edge, both sides, one estimate per share and two flags
-    /// each). Refuses more than [`MAX_PARTICLES`] particles, which `particle_area` alone cannot bound.
+    /// per area particle at the default subtriangle edge, both sides, one estimate per share, two flags
+    /// and a list-index entry each). Refuses more than [`MAX_PARTICLES`] particles, which `particle_area` alone cannot bound.
     pub fn resident_estimate(&self, scene: &Scene) -> Result<MemoryEstimate, TechniqueError> {
         let field = if self.particle_area.is_some() { "particle_area" } else { "particles" };
         let planned = particles::planned_particles(scene, self.particle_count(scene), self.particle_area);
@@ -111,7 +111,7 @@ impl ParticleGiConfig {
                 (particles / 2, particles::SAMPLING_BYTES_PER_POINT),
                 (particles * links_each, links::BYTES_PER_LINK + links::TRACING_BYTES_PER_LINK),
                 (particles * shares, 2 * RGB_BYTES),
-                (2 * particles, shares * RGB_BYTES + 2),
+                (2 * particles, shares * RGB_BYTES + 2 + radiance::INDEX_BYTES_PER_KEY),
             ],
         )
     }

@@ -163,7 +163,7 @@ pub fn gather(links: &LinkSet, lighting: &Lighting, needed: &[u32], particles: u
 pub fn particles_to_gather(lists: &EstimationLists, keys: &[RadianceKey], particles: usize) -> Vec<u32> {
     let mut wanted = vec![false; particles];
     for k in keys {
-        if let Some(l) = lists.lists.get(k) {
+        if let Some(l) = lists.get(*k) {
             l.particles.iter().for_each(|&i| wanted[i as usize] = true);
         }
     }
@@ -181,7 +181,7 @@ pub fn estimate(
 ) -> Vec<Rgb> {
     keys.par_iter()
         .flat_map_iter(|k| {
-            let list = lists.lists.get(k).map_or(&[][..], |l| &l.particles[..]);
+            let list = lists.get(*k).map_or(&[][..], |l| &l.particles[..]);
             let area: f32 = list.iter().map(|&i| areas[i as usize]).sum();
             (0..shares).map(move |g| {
                 let flux =

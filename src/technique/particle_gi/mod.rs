@@ -211,6 +211,7 @@ impl ParticleGi {
         let scatter = LinkSet::empty(c.scatter_links, c.seed ^ SCATTER_SALT, particles.len());
         let gather = LinkSet::empty(c.gather_links, c.seed ^ GATHER_SALT, particles.len());
         let tessellation = Tessellation::build(ctx.scene, c.subtriangle_edge * spacing);
+        let lists = EstimationLists::new(&tessellation);
         self.estimates = Estimates::new(&tessellation, lighting::share_count(ctx.scene.lights.len()));
         self.geometry = Some(Geometry {
             particles,
@@ -218,7 +219,7 @@ impl ParticleGi {
             scatter,
             gather,
             tessellation,
-            lists: EstimationLists::default(),
+            lists,
             spacing,
             diagonal,
             scales: (0..ctx.scene.objects.len()).map(|i| particles::stable_scale(ctx.scene, i)).collect(),
@@ -240,6 +241,7 @@ impl ParticleGi {
             g.particles.rescale_object(ctx.scene, o);
             g.tessellation.build_object(ctx.scene, o, self.config.subtriangle_edge * g.spacing);
             self.estimates.reset_object(o, g.tessellation.counts[o]);
+            g.lists.reset_object(o, g.tessellation.counts[o]);
             g.scales[o] = particles::stable_scale(ctx.scene, o);
             moved[o] = true;
         }
@@ -317,8 +319,7 @@ impl ParticleGi {
         let geometry_ms = t.elapsed().as_secs_f64() * 1e3;
         let work = lighting.scatter(&inputs, &g.scatter, &scatter);
         // Fresh estimates whose lists held are gathered again in place; the rest go.
-        let keys: Vec<RadianceKey> =
-            self.estimates.fresh_keys().into_iter().filter(|k| g.lists.lists.contains_key(k)).collect();
+        let keys: Vec<RadianceKey> = self.estimates.fresh_keys().into_iter().filter(|&k| g.lists.contains(k)).collect();
         self.pending.links_traced += reached;
         self.pending.links_built_lazily += reached;
         self.pending.geometry_ms += geometry_ms;
@@ -452,11 +453,11 @@ impl ParticleGi {
         let (radius, cosine) = (self.config.estimation_radius * g.spacing, self.config.estimation_cosine);
         let built: Vec<(RadianceKey, radiance::EstimationList)> = missing
             .par_iter()
-            .filter(|(k, _)| !g.lists.lists.contains_key(k))
+            .filter(|(k, _)| !g.lists.contains(*k))
             .map(|(k, v)| (*k, EstimationLists::build(ctx.scene, &g.particles, &g.grids, v, radius, cosine)))
             .collect();
         self.pending.lists_built += built.len() as u64;
-        g.lists.lists.extend(built);
+        built.into_iter().for_each(|(k, l)| g.lists.insert(k, l));
         self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
         let keys: Vec<RadianceKey> = missing.iter().map(|(k, _)| *k).collect();
         self.gather_and_store(ctx, &keys);
@@ -592,7 +593,7 @@ impl Technique for ParticleGi {
             stats.radiance_particles = g.tessellation.total;
             stats.links_total = (g.scatter.len() + g.gather.len()) as u64;
             stats.scattering_links = g.scatter.len() as u64;
-            stats.lists_cached = g.lists.lists.len() as u64;
+            stats.lists_cached = g.lists.len() as u64;
             stats.estimates_cached = self.estimates.cached();
             let memory = &mut stats.memory;
             memory.set("particles", g.particles.memory_bytes() + g.tessellation.memory_bytes());

@@ -21,7 +21,6 @@ use super::grid::ObjectGrids;
 use super::particles::{pose, AreaParticles};
 use crate::scene::Scene;
 use glam::{Vec2, Vec3};
-use std::collections::HashMap;
 
 /// A radiance particle on one side: `object << OBJECT_SHIFT | id << 1 | side`, its id counted
 /// within its object, so each object has its own key space and re-tessellating one object
@@ -140,9 +139,8 @@ impl Tessellation {
 }
 
 /// A cached estimation list.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, Default)]
 pub struct EstimationList {
-    pub object: u32,
     pub particles: Vec<u32>,
 }
 
@@ -152,11 +150,21 @@ fn admitted(particles: &AreaParticles, k: usize, q: Vec3, n: Vec3, radius: f32, 
     (particles.position[k] - q).length_squared() <= radius * radius && particles.normal[k].dot(n) >= min_cosine
 }
 
-/// Estimation lists of the radiance particles needed so far.
+/// Estimation lists of the radiance particles needed so far, indexed directly by key: per
+/// object, per key within it (`id << 1 | side`), the slot of its list ([`NO_LIST`]: none).
 #[derive(Clone, Debug, Default)]
 pub struct EstimationLists {
-    pub lists: HashMap<RadianceKey, EstimationList>,
+    slots: Vec<Vec<u32>>,
+    lists: Vec<EstimationList>,
+    /// Slots of `lists` whose list was dropped, reused first.
+    free: Vec<u32>,
 }
+
+/// A key without a list.
+const NO_LIST: u32 = u32::MAX;
+
+/// Bytes per radiance particle and side the index holds.
+pub const INDEX_BYTES_PER_KEY: u64 = 4;
 
 impl EstimationLists {
     /// Builds the list of radiance particle `v`: area particles of `v`'s object and side within
@@ -182,17 +190,73 @@ impl EstimationLists {
         if found.is_empty() {
             found.extend(grid.nearest(particles, q, 8, |k| particles.normal[k].dot(n) > 0.0));
         }
-        EstimationList { object: v.object, particles: found }
+        EstimationList { particles: found }
+    }
+
+    /// No lists, for the radiance particles of `tessellation` (both sides each).
+    pub fn new(tessellation: &Tessellation) -> EstimationLists {
+        let slots = tessellation.counts.iter().map(|&c| vec![NO_LIST; 2 * c as usize]).collect();
+        EstimationLists { slots, lists: Vec::new(), free: Vec::new() }
+    }
+
+    fn slot(&self, key: RadianceKey) -> Option<usize> {
+        let (object, local) = key_parts(key);
+        let slot = *self.slots.get(object)?.get(local)?;
+        (slot != NO_LIST).then_some(slot as usize)
+    }
+
+    pub fn get(&self, key: RadianceKey) -> Option<&EstimationList> {
+        self.slot(key).map(|s| &self.lists[s])
+    }
+
+    pub fn contains(&self, key: RadianceKey) -> bool {
+        self.slot(key).is_some()
+    }
+
+    /// Holds `list` as `key`'s (a key of the tessellation the index was made or reset for).
+    pub fn insert(&mut self, key: RadianceKey, list: EstimationList) {
+        let (object, local) = key_parts(key);
+        let at = &mut self.slots[object][local];
+        if *at != NO_LIST {
+            self.lists[*at as usize] = list;
+        } else if let Some(s) = self.free.pop() {
+            (*at, self.lists[s as usize]) = (s, list);
+        } else {
+            *at = self.lists.len() as u32;
+            self.lists.push(list);
+        }
+    }
+
+    /// Lists held.
+    pub fn len(&self) -> usize {
+        self.lists.len() - self.free.len()
     }
 
     /// Drops the lists of radiance particles on a moved object (`moved[object]`): they are
     /// made of their own object's particles only.
     pub fn invalidate(&mut self, moved: &[bool]) {
-        self.lists.retain(|_, l| !moved.get(l.object as usize).copied().unwrap_or(true));
+        for (object, slots) in self.slots.iter_mut().enumerate() {
+            if moved.get(object).copied().unwrap_or(true) {
+                for at in slots.iter_mut().filter(|at| **at != NO_LIST) {
+                    self.lists[*at as usize] = EstimationList::default();
+                    self.free.push(std::mem::replace(at, NO_LIST));
+                }
+            }
+        }
+    }
+
+    /// Drops `object`'s lists and makes room for its `count` radiance particles per side (it
+    /// was tessellated again).
+    pub fn reset_object(&mut self, object: usize, count: u64) {
+        let moved: Vec<bool> = (0..self.slots.len()).map(|o| o == object).collect();
+        self.invalidate(&moved);
+        self.slots[object] = vec![NO_LIST; 2 * count as usize];
     }
 
     pub fn memory_bytes(&self) -> u64 {
-        self.lists.values().map(|l| (std::mem::size_of::<EstimationList>() + 8 + l.particles.len() * 4) as u64).sum()
+        let index = self.slots.iter().map(|s| s.len() as u64 * INDEX_BYTES_PER_KEY).sum::<u64>();
+        let lists = self.lists.iter().map(|l| (std::mem::size_of::<EstimationList>() + l.particles.len() * 4) as u64);
+        index + lists.sum::<u64>()
     }
 }
 
@@ -302,7 +366,7 @@ mod tests {
         // equals the list built afresh after the move; the box's go. Negative control: the
         // box's own lists, built again after the move, differ from before it.
         let Fixture { scene, mut particles, mut grids, tessellation, radius, cosine } = fixture();
-        let mut lists = EstimationLists::default();
+        let mut lists = EstimationLists::new(&tessellation);
         let mut vertices = Vec::new();
         // The box is 0.6 wide, centred 0.3 above the floor's centre.
         let near_box = |q: Vec3| (q - Vec3::new(0.0, 0.3, 0.0)).length() < 0.52 + radius;
@@ -312,9 +376,7 @@ mod tests {
                 for (u, v) in grid {
                     let corners = tessellation.corners(object, triangle, Vec2::new(u, v), 0).expect("corners");
                     for (key, vertex, _) in corners {
-                        lists
-                            .lists
-                            .insert(key, EstimationLists::build(&scene, &particles, &grids, &vertex, radius, cosine));
+                        lists.insert(key, EstimationLists::build(&scene, &particles, &grids, &vertex, radius, cosine));
                         vertices.push((key, vertex));
                     }
                 }
@@ -332,10 +394,10 @@ mod tests {
         for (key, vertex) in &vertices {
             let fresh = EstimationLists::build(&scene, &particles, &grids, vertex, radius, cosine);
             match vertex.object {
-                0 => assert_eq!(lists.lists.get(key).map(|l| &l.particles), Some(&fresh.particles), "floor {key}"),
+                0 => assert_eq!(lists.get(*key).map(|l| &l.particles), Some(&fresh.particles), "floor {key}"),
                 _ => {
-                    assert!(!lists.lists.contains_key(key), "a list of the moved box was kept");
-                    changed += usize::from(before.lists[key].particles != fresh.particles);
+                    assert!(!lists.contains(*key), "a list of the moved box was kept");
+                    changed += usize::from(before.get(*key).expect("held before").particles != fresh.particles);
                 }
             }
         }
