@@ -158,6 +158,40 @@ impl BoxTree {
     }
 }
 
+/// A box's bounding sphere seen from a fixed point, the apex: the cone of directions towards
+/// it (unit `axis`, half-angle β as its sine and cosine) and the distance `near` from the apex
+/// to the sphere. A segment from the apex can touch the box only if its direction lies in the
+/// cone and it is at least `near` long. The radius is padded by 10⁻⁴ against rounding.
+#[derive(Clone, Copy, Debug)]
+pub struct SphereCone {
+    pub axis: Vec3,
+    pub sin: f32,
+    pub cos: f32,
+    pub near: f32,
+}
+
+impl SphereCone {
+    /// The cone of `b` from `apex`; `None` when the apex lies in the sphere (every direction
+    /// may reach the box).
+    pub fn new(apex: Vec3, b: &Aabb) -> Option<SphereCone> {
+        let centre = (b.min + b.max) * 0.5 - apex;
+        let (distance, radius) = (centre.length(), (b.max - b.min).length() * 0.5 * (1.0 + 1e-4));
+        if distance <= radius {
+            return None;
+        }
+        let sin = radius / distance;
+        Some(SphereCone { axis: centre / distance, sin, cos: (1.0 - sin * sin).sqrt(), near: distance - radius })
+    }
+
+    /// Might the segment from the apex to `apex + d` touch the box? (Conservative: the angle
+    /// test has a relative margin of 10⁻⁵.)
+    #[inline]
+    pub fn may_reach(&self, d: Vec3) -> bool {
+        let (s, length2) = (d.dot(self.axis), d.length_squared());
+        s > 0.0 && s * s >= length2 * self.cos * self.cos * (1.0 - 1e-5) && length2 >= self.near * self.near
+    }
+}
+
 /// A segment prepared for many box tests: with no zero component of the direction, one
 /// reciprocal serves every box; otherwise the exact per-axis test handles the parallel slabs.
 /// Both tests are monotone in the box, so a box that contains another is touched whenever the

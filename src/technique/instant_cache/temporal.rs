@@ -24,7 +24,9 @@
 //! against exactly those surfaces) or lay on it before (then it touched the old bounds and case 4
 //! retraces it); a VPL that moved is retraced outright; everything else is untouched geometry.
 //! Boxes are widened by [`BOX_SLACK`] of the scene diagonal so a ray grazing a box in Embree's
-//! arithmetic is never missed by the slab test's. Tiny contributions RGBE rounds to zero are
+//! arithmetic is never missed by the slab test's. Before the slab tests, a ray meets a cheaper
+//! one: from each VPL's anchor, the cone around each moved box's bounding sphere
+//! ([`SphereCone`], computed once a tick per VPL), which a ray that touches the box lies in. Tiny contributions RGBE rounds to zero are
 //! indistinguishable from shadow; both give zero whichever way they are classified, except
 //! when a VPL's intensity changes, and then such a ray is retraced.
 use super::cache::{contribution, Record};
@@ -33,7 +35,7 @@ use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
 use crate::embree::{CommittedScene, EmbreeError};
 use crate::scene::edits::{Aabb, MovedSurface, SceneDelta};
 use crate::scene::{Scene, SceneAccel, SurfaceId};
-use crate::technique::box_tree::{widened, BoxTree, BOX_SLACK};
+use crate::technique::box_tree::{widened, BoxTree, SphereCone, BOX_SLACK};
 use glam::Vec3;
 
 /// How a VPL of this tick relates to last tick's VPL with the same key.
@@ -128,6 +130,10 @@ pub struct TickChanges {
     moved_now: Option<CommittedScene>,
     new_boxes: BoxTree,
     old_boxes: BoxTree,
+    /// Per VPL of this tick, the moved surfaces' new and old bounds seen from its anchor
+    /// (`None`: the anchor lies in one's bounding sphere): a cheap pre-test before the trees.
+    new_cones: Vec<Vec<Option<SphereCone>>>,
+    old_cones: Vec<Vec<Option<SphereCone>>>,
     /// `moved_objects[object]`: the object moved this tick.
     moved_objects: Vec<bool>,
 }
@@ -160,13 +166,20 @@ impl TickChanges {
                 moved_objects[i as usize] = true;
             }
         }
-        let boxes = |b: fn(&MovedSurface) -> &Aabb| delta.moved.iter().map(|m| widened(b(m), slack)).collect();
+        let boxes =
+            |b: fn(&MovedSurface) -> &Aabb| -> Vec<Aabb> { delta.moved.iter().map(|m| widened(b(m), slack)).collect() };
+        let (new_boxes, old_boxes) = (boxes(|m| &m.new_bounds), boxes(|m| &m.old_bounds));
+        let cones = |boxes: &[Aabb]| -> Vec<Vec<Option<SphereCone>>> {
+            vpls.iter().map(|v| boxes.iter().map(|b| SphereCone::new(v.anchor, b)).collect()).collect()
+        };
         Ok(Some(TickChanges {
             vpls: diff,
             old_vpls,
             moved_now,
-            new_boxes: BoxTree::new(boxes(|m| &m.new_bounds)),
-            old_boxes: BoxTree::new(boxes(|m| &m.old_bounds)),
+            new_cones: cones(&new_boxes),
+            old_cones: cones(&old_boxes),
+            new_boxes: BoxTree::new(new_boxes),
+            old_boxes: BoxTree::new(old_boxes),
             moved_objects,
         }))
     }
@@ -185,7 +198,8 @@ impl TickChanges {
         let contributions: Vec<u32> = vpls
             .iter()
             .zip(&self.vpls.changes)
-            .map(|(vpl, change)| {
+            .enumerate()
+            .map(|(k, (vpl, change))| {
                 let old = match *change {
                     VplChange::Same(o) | VplChange::Reweighted(o) => o as usize,
                     VplChange::Invalidated => return self.retrace(accel, vpl, p, n, min_distance, &mut work),
@@ -194,7 +208,7 @@ impl TickChanges {
                 if before != 0 && matches!(change, VplChange::Same(_)) {
                     // The same VPL, seen before: its contribution stands unless a moved
                     // surface now blocks it, and is not worked out again.
-                    if self.still_visible(accel, vpl, from, true, &mut work) {
+                    if self.still_visible(accel, (k, vpl), from, true, &mut work) {
                         return before;
                     }
                     work.occluded += 1;
@@ -211,7 +225,7 @@ impl TickChanges {
                         return self.retrace(accel, vpl, p, n, min_distance, &mut work);
                     }
                 }
-                let visible = self.still_visible(accel, vpl, from, visible_before, &mut work);
+                let visible = self.still_visible(accel, (k, vpl), from, visible_before, &mut work);
                 let now = if visible { rgbe::pack(e) } else { 0 };
                 work.reweighted += u64::from(now != before && visible_before && visible);
                 match (visible_before, visible) {
@@ -236,30 +250,40 @@ impl TickChanges {
         c
     }
 
-    /// Cases 3–4 for a ray to an unchanged VPL that was `visible_before`.
+    /// Cases 3–4 for a ray to an unchanged VPL (`k`: its index this tick) that was
+    /// `visible_before`.
     fn still_visible(
         &self,
         accel: &SceneAccel,
-        vpl: &Vpl,
+        (k, vpl): (usize, &Vpl),
         from: Vec3,
         visible_before: bool,
         work: &mut Refresh,
     ) -> bool {
         let Some(moved_now) = &self.moved_now else { return visible_before };
-        let ray = visibility_ray(from, vpl);
+        // The segment from the anchor back to the record, for the cones' pre-test.
+        let reaches =
+            |cones: &[Option<SphereCone>]| cones.iter().any(|c| c.is_none_or(|c| c.may_reach(from - vpl.anchor)));
         // Case 3: a moved surface now lies on the ray.
-        let (near_new, tests) = self.new_boxes.hits(ray.origin, ray.dir, ray.tfar);
-        work.occlusion_box_tests += tests;
-        if near_new {
-            work.occlusion_rays += 1;
-            if moved_now.occluded1(&ray) {
-                return false;
+        if reaches(&self.new_cones[k]) {
+            let ray = visibility_ray(from, vpl);
+            let (near_new, tests) = self.new_boxes.hits(ray.origin, ray.dir, ray.tfar);
+            work.occlusion_box_tests += tests;
+            if near_new {
+                work.occlusion_rays += 1;
+                if moved_now.occluded1(&ray) {
+                    return false;
+                }
             }
         }
         if visible_before {
             return true;
         }
         // Case 4: the shadow may have come from a moved surface where it was.
+        if !reaches(&self.old_cones[k]) {
+            return false;
+        }
+        let ray = visibility_ray(from, vpl);
         let (near_old, tests) = self.old_boxes.hits(ray.origin, ray.dir, ray.tfar);
         work.deocclusion_box_tests += tests;
         if !near_old {

@@ -32,7 +32,7 @@ use crate::core::{offset_ray_origin, Rng};
 use crate::embree::Ray;
 use crate::scene::edits::Aabb;
 use crate::scene::{Scene, SceneAccel, SurfaceId};
-use crate::technique::box_tree::BoxTree;
+use crate::technique::box_tree::{BoxTree, SphereCone};
 use crate::technique::RenderContext;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
@@ -344,16 +344,11 @@ impl LinkSet {
         }
         let mut mask = [0u8; MAX_STRATA];
         for b in spans {
-            let centre = (b.min + b.max) * 0.5 - origin;
-            let (distance, radius) = (centre.length(), (b.max - b.min).length() * 0.5 * (1.0 + 1e-4));
-            if distance <= radius {
-                return None;
-            }
-            let sin_beta = radius / distance;
-            let axis = frame.to_local(centre / distance);
+            let cone = SphereCone::new(origin, b)?;
+            let axis = frame.to_local(cone.axis);
             // A sphere wholly below the tangent plane is out of every link's reach.
-            if axis.z >= -sin_beta {
-                self.cones.mark(axis, (1.0 - sin_beta * sin_beta).sqrt(), sin_beta, &mut mask);
+            if axis.z >= -cone.sin {
+                self.cones.mark(axis, cone.cos, cone.sin, &mut mask);
             }
         }
         Some(mask)
