@@ -26,9 +26,10 @@
 //! Boxes are widened by [`BOX_SLACK`] of the scene diagonal so a ray grazing a box in Embree's
 //! arithmetic is never missed by the slab test's. Before the slab tests, a ray meets a cheaper
 //! one: from each VPL's anchor, the cone around each moved box's bounding sphere
-//! ([`SphereCone`], computed once a tick per VPL), which a ray that touches the box lies in. Tiny contributions RGBE rounds to zero are
-//! indistinguishable from shadow; both give zero whichever way they are classified, except
-//! when a VPL's intensity changes, and then such a ray is retraced.
+//! ([`SphereCone`], computed once a tick per VPL), which a ray that touches the box lies in.
+//! Tiny contributions RGBE rounds to zero are indistinguishable from shadow; both give zero
+//! whichever way they are classified, except when a VPL's intensity changes, and then such a
+//! ray is retraced.
 use super::cache::{contribution, Record};
 use super::rgbe;
 use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};

@@ -90,7 +90,8 @@ impl ParticleGiConfig {
     /// sets (an end and a distance per link, plus what tracing them holds while building), the field's
     /// direct flux and radiance per lighting share, and the estimate cache (about one radiance particle
     /// per area particle at the default subtriangle edge, both sides, one estimate per share, two flags
-    /// and a list-index entry each). Refuses more than [`MAX_PARTICLES`] particles, which `particle_area` alone cannot bound.
+    /// and a list-index entry each). Refuses more than [`MAX_PARTICLES`] particles, which
+    /// `particle_area` alone cannot bound.
     pub fn resident_estimate(&self, scene: &Scene) -> Result<MemoryEstimate, TechniqueError> {
         let field = if self.particle_area.is_some() { "particle_area" } else { "particles" };
         let planned = particles::planned_particles(scene, self.particle_count(scene), self.particle_area);
