@@ -105,8 +105,6 @@ impl<'a> Target<'a> {
 pub struct Moves<'a> {
     /// Per object: did it move (or change scale)?
     pub moved: &'a [bool],
-    /// Every moved surface's old and new bounds, widened.
-    pub boxes: &'a [Aabb],
     /// Per moved surface, the union of its old and new bounds, widened.
     pub spans: Vec<Aabb>,
     /// The old bounds alone, and the new bounds alone.
@@ -298,14 +296,14 @@ impl LinkSet {
             let (centre, half) = ((b.min + b.max) * 0.5, (b.max - b.min) * 0.5);
             n.dot(centre - p) + n.abs().dot(half) >= 0.0
         };
-        if !moves.boxes.iter().any(in_front) {
-            return (Vec::new(), moves.boxes.len() as u64);
+        if !moves.spans.iter().any(in_front) {
+            return (Vec::new(), moves.spans.len() as u64);
         }
         let frame = ShadingFrame::from_normal(n);
         let strata = self.reachable_strata(&frame, origin, &moves.spans);
         let reachable = |k: usize| strata.as_ref().is_none_or(|s| s[k] != 0);
         // A link shorter than the way to the nearest box cannot touch one.
-        let reach = moves.boxes.iter().map(|b| (b.min - origin).max(origin - b.max).max(Vec3::ZERO).length());
+        let reach = moves.spans.iter().map(|b| (b.min - origin).max(origin - b.max).max(Vec3::ZERO).length());
         let reach = reach.fold(f32::INFINITY, f32::min);
         let (mut stale, mut tests) = (Vec::new(), 0u64);
         for l in links {

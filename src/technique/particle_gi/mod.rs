@@ -258,10 +258,8 @@ impl ParticleGi {
         let bounds = |old: bool| -> Vec<Aabb> {
             delta.moved.iter().map(|m| widened(if old { &m.old_bounds } else { &m.new_bounds }, slack)).collect()
         };
-        let boxes: Vec<Aabb> = [bounds(true), bounds(false)].concat();
         let spans = delta.moved.iter().map(|m| widened(&m.old_bounds.union(&m.new_bounds), slack)).collect();
-        let (old, new) = (BoxTree::new(bounds(true)), BoxTree::new(bounds(false)));
-        let moves = Moves { moved: &moved, boxes: &boxes, spans, old, new };
+        let moves = Moves { moved: &moved, spans, old: BoxTree::new(bounds(true)), new: BoxTree::new(bounds(false)) };
         // A moved particle's gathering links are traced again only if it is gathered again.
         g.gather.forget(|i| moved[g.particles.object[i as usize] as usize]);
         let target = Target::new(ctx, &g.particles, &g.grids);
