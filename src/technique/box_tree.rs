@@ -281,6 +281,33 @@ pub fn meets_hull(p: Vec3, l: &Aabb, b: &Aabb) -> bool {
 mod tests {
     use super::*;
 
+    /// Every segment from a cone's apex that touches the box passes `may_reach` (random boxes,
+    /// apexes and segments, including ones ending just inside the box), and the cone is not
+    /// loose everywhere: most segments that miss the box's sphere by a wide angle are refused.
+    #[test]
+    fn a_sphere_cone_admits_every_segment_that_touches_its_box() {
+        let mut rng = crate::core::Rng::new(17, 0);
+        let r =
+            |rng: &mut crate::core::Rng, s: f32| (Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32()) - 0.5) * s;
+        let (mut touching, mut refused) = (0, 0);
+        for _ in 0..400 {
+            let (c, h) = (r(&mut rng, 10.0), r(&mut rng, 2.0).abs() + Vec3::splat(0.01));
+            let b = Aabb { min: c - h, max: c + h };
+            let apex = r(&mut rng, 20.0);
+            let Some(cone) = SphereCone::new(apex, &b) else { continue };
+            for _ in 0..200 {
+                let target = c + r(&mut rng, 4.0) * h;
+                let d = (target - apex) * (0.5 + rng.next_f32());
+                let touches = segment_hits_box(apex, d, 1.0, &b);
+                touching += usize::from(touches);
+                assert!(!touches || cone.may_reach(d), "apex {apex}, box {b:?}, segment {d}");
+                refused += usize::from(!cone.may_reach(-d));
+            }
+        }
+        assert!(touching > 5_000, "too few touching segments: {touching}");
+        assert!(refused > 5_000, "segments pointing away are not refused: {refused}");
+    }
+
     /// Whether any of `n` segments from `p` to random points of `l` touches `b`.
     fn sampled_hull_meets(p: Vec3, l: &Aabb, b: &Aabb, rng: &mut crate::core::Rng, n: usize) -> bool {
         (0..n).any(|_| {

@@ -235,12 +235,9 @@ impl EstimationLists {
     /// Drops the lists of radiance particles on a moved object (`moved[object]`): they are
     /// made of their own object's particles only.
     pub fn invalidate(&mut self, moved: &[bool]) {
-        for (object, slots) in self.slots.iter_mut().enumerate() {
+        for object in 0..self.slots.len() {
             if moved.get(object).copied().unwrap_or(true) {
-                for at in slots.iter_mut().filter(|at| **at != NO_LIST) {
-                    self.lists[*at as usize] = EstimationList::default();
-                    self.free.push(std::mem::replace(at, NO_LIST));
-                }
+                self.drop_object(object);
             }
         }
     }
@@ -248,9 +245,15 @@ impl EstimationLists {
     /// Drops `object`'s lists and makes room for its `count` radiance particles per side (it
     /// was tessellated again).
     pub fn reset_object(&mut self, object: usize, count: u64) {
-        let moved: Vec<bool> = (0..self.slots.len()).map(|o| o == object).collect();
-        self.invalidate(&moved);
+        self.drop_object(object);
         self.slots[object] = vec![NO_LIST; 2 * count as usize];
+    }
+
+    fn drop_object(&mut self, object: usize) {
+        for at in self.slots[object].iter_mut().filter(|at| **at != NO_LIST) {
+            self.lists[*at as usize] = EstimationList::default();
+            self.free.push(std::mem::replace(at, NO_LIST));
+        }
     }
 
     pub fn memory_bytes(&self) -> u64 {
