@@ -1,6 +1,7 @@
 //! `instant_cache` mode `temporal`: invalidation is exact (every record equals a fresh
 //! computation after each of Algorithm 1's cases), a static scene costs nothing once the cache
-//! has settled, and moving an object away and back restores the cache.
+//! has settled, moving an object away and back restores the cache, and a still view's
+//! refinement leaves the resident cache as it was.
 mod common;
 use common::*;
 use relume::embree::Device;
@@ -37,6 +38,8 @@ fn temporal(reevaluation: Reevaluation) -> TechniqueConfig {
         vpls: 64,
         reevaluation,
         audit: true,
+        // These tests are about the resident generation: still ticks render it again.
+        refine_ticks: 0,
         ..InstantCacheConfig::default()
     })
 }
@@ -227,6 +230,7 @@ fn a_still_tick_renders_what_a_fresh_lookup_renders() {
     let config = TechniqueConfig::InstantCache(InstantCacheConfig {
         mode: CacheMode::Temporal,
         vpls: 64,
+        refine_ticks: 0,
         ..InstantCacheConfig::default()
     });
     pool.install(|| {
@@ -245,5 +249,74 @@ fn a_still_tick_renders_what_a_fresh_lookup_renders() {
         assert_eq!(kept.image.pixels, twin(HOVERING).pixels, "a still tick differs from a fresh lookup");
         let moved = twin([HOVERING[0] + 0.01, HOVERING[1], HOVERING[2]]);
         assert_ne!(kept.image.pixels, moved.pixels, "the comparison cannot tell a moved slab");
+    });
+}
+
+/// `temporal` with 64 VPLs, records that age out after two unused ticks, and `refine_ticks`.
+fn refining(refine_ticks: u32) -> TechniqueConfig {
+    TechniqueConfig::InstantCache(InstantCacheConfig {
+        mode: CacheMode::Temporal,
+        vpls: 64,
+        max_age: 2,
+        refine_ticks,
+        audit: true,
+        ..InstantCacheConfig::default()
+    })
+}
+
+#[test]
+fn a_still_view_refines_then_rests() {
+    // Property: each of the first `refine_ticks` still ticks renders the next VPL generation
+    // into the accumulated image (one more pass, new records in its own cache); after them a
+    // still tick traces no ray and adds no pass. A change starts over at generation 0.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    pool.install(|| {
+        let mut s = Session::new(room(HOVERING), &refining(3), 5, &device).expect("session");
+        let first = s.tick().unwrap();
+        assert_eq!((stats(&first).generation, first.spp), (0, 1));
+        for tick in 1..=6u32 {
+            let frame = s.tick().unwrap();
+            let st = stats(&frame);
+            if tick <= 3 {
+                assert_eq!((st.generation, st.idle, frame.spp), (tick, false, tick + 1), "tick {tick}: {st:?}");
+                assert!(st.records_created > 0 && st.visibility_rays > 0 && st.vpl_rays > 0, "tick {tick}: {st:?}");
+                assert_exact(&format!("refinement {tick}"), &st);
+            } else {
+                assert_eq!((st.generation, st.idle, frame.spp), (3, true, 4), "tick {tick}: {st:?}");
+                assert_eq!(frame.stats.rays.total(), 0, "tick {tick}: a resting view traced rays: {st:?}");
+            }
+        }
+        s.queue_edits(vec![move_slab([0.1, HOVERING[1], HOVERING[2]])]).unwrap();
+        let moved = s.tick().unwrap();
+        assert_eq!((stats(&moved).generation, stats(&moved).idle, moved.spp), (0, false, 1), "{:?}", stats(&moved));
+    });
+}
+
+#[test]
+fn refinement_leaves_the_resident_cache_as_it_was() {
+    // Property: refinement renders other generations in a cache of their own, so after six
+    // still ticks (three refining, three resting) and a move of the slab, the session renders
+    // the move bit for bit as its twin that re-rendered the resident generation on every still
+    // tick (`refine_ticks` 0), with the same records made. With `max_age` 2 the resident
+    // records age out during the still ticks unless they stay marked used: negative control,
+    // without that marking the session makes its records again and its image differs.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    pool.install(|| {
+        let run = |refine_ticks: u32| {
+            let mut s = Session::new(room(HOVERING), &refining(refine_ticks), 5, &device).expect("session");
+            for _ in 0..7 {
+                s.tick().unwrap();
+            }
+            s.queue_edits(vec![move_slab([0.1, HOVERING[1], HOVERING[2]])]).unwrap();
+            s.tick().unwrap()
+        };
+        let (refined, twin) = (run(3), run(0));
+        let (r, t) = (stats(&refined), stats(&twin));
+        assert_exact("refined", &r);
+        assert!(r.records_refreshed > 0, "the move re-evaluated nothing: {r:?}");
+        assert_eq!((r.records_created, r.records_aged_out), (t.records_created, t.records_aged_out), "{r:?} vs {t:?}");
+        assert_eq!(refined.image.pixels, twin.image.pixels, "refinement changed the resident generation");
     });
 }

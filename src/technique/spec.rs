@@ -66,8 +66,9 @@ impl TechniqueConfig {
                 let mode = serde_json::to_value(c.mode).ok().and_then(|v| v.as_str().map(str::to_string));
                 let on_demand = c.reevaluation == super::instant_cache::Reevaluation::OnDemand;
                 let theta = c.normal_tolerance;
+                let refine = c.refine_ticks;
                 format!(
-                    "instant_cache:{}@{}{}{}",
+                    "instant_cache:{}@{}{}{}{}",
                     mode.unwrap_or_default(),
                     c.vpls,
                     if on_demand { ":reevaluation=on_demand" } else { "" },
@@ -75,6 +76,11 @@ impl TechniqueConfig {
                         String::new()
                     } else {
                         format!(":normal_tolerance={theta}")
+                    },
+                    if refine == super::instant_cache::DEFAULT_REFINE_TICKS {
+                        String::new()
+                    } else {
+                        format!(":refine_ticks={refine}")
                     }
                 )
             }

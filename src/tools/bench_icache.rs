@@ -22,6 +22,10 @@ pub struct IcacheArgs {
     /// θ of the caches, in degrees (default: `instant_cache`'s).
     #[arg(long)]
     pub normal_tolerance: Option<f32>,
+    /// Still ticks that refine the view (default: `instant_cache`'s); 0 measures a still
+    /// scene's resident ticks.
+    #[arg(long)]
+    pub refine_ticks: Option<u32>,
     /// Check every record against a fresh computation after each frame (slow).
     #[arg(long)]
     pub audit: bool,
@@ -78,7 +82,8 @@ pub struct IcacheReport {
 fn configurations(args: &IcacheArgs) -> Vec<(&'static str, InstantCacheConfig)> {
     let defaults = InstantCacheConfig::default();
     let normal_tolerance = args.normal_tolerance.unwrap_or(defaults.normal_tolerance);
-    let base = InstantCacheConfig { vpls: args.vpls, audit: args.audit, normal_tolerance, ..defaults };
+    let refine_ticks = args.refine_ticks.unwrap_or(defaults.refine_ticks);
+    let base = InstantCacheConfig { vpls: args.vpls, audit: args.audit, normal_tolerance, refine_ticks, ..defaults };
     vec![
         ("igi", InstantCacheConfig { mode: CacheMode::Igi, audit: false, ..base.clone() }),
         ("static", InstantCacheConfig { mode: CacheMode::Static, ..base.clone() }),

@@ -49,6 +49,10 @@ pub struct InstantCacheConfig {
     pub reevaluation: Reevaluation,
     /// `temporal`: records no pixel used for this many ticks are dropped.
     pub max_age: u32,
+    /// Still ticks (no change at all) that refine the view, each rendering the next VPL
+    /// generation with new sub-pixel points into the accumulated image; after them a still
+    /// tick adds nothing. 0: a still tick renders the resident generation again.
+    pub refine_ticks: u32,
     /// After each pass, recompute every record from scratch and report the records that differ
     /// (`audit_*` stats). Costs a static cache's work per pass; for tests and benchmarks.
     pub audit: bool,
@@ -67,6 +71,7 @@ impl Default for InstantCacheConfig {
             spp: 1,
             reevaluation: Reevaluation::Immediate,
             max_age: 16,
+            refine_ticks: DEFAULT_REFINE_TICKS,
             audit: false,
         }
     }
@@ -82,6 +87,12 @@ pub const DEFAULT_NORMAL_TOLERANCE: f32 = 20.0;
 /// scenes at the default caching radius).
 const WEIGHTS_PER_SAMPLE: u64 = 16;
 
+/// `refine_ticks`' default: see `bench error`'s still-view rows in docs/benchmarks.md.
+pub const DEFAULT_REFINE_TICKS: u32 = 64;
+
+/// Most refinement generations (VPL keys of every generation must fit in a u32).
+pub const MAX_REFINE_TICKS: u32 = 256;
+
 /// Most VPLs a tick may shoot.
 pub const MAX_VPLS: u32 = 65_536;
 
@@ -89,20 +100,28 @@ impl InstantCacheConfig {
     /// Resident memory at `pixels` pixels (`budget.rs`): the VPLs and the cache records, at
     /// most one per camera sample of a tick, each holding 4 bytes per VPL and its grid entry,
     /// and the empty grid; `audit` holds a second cache while it recomputes; the caches keep
-    /// each sample's hit, result and weights.
+    /// each sample's hit, result and weights. Refinement keeps a second generation's VPLs, and
+    /// in `temporal` its own cache and samples beside the resident ones.
     pub fn resident_estimate(&self, pixels: u64) -> Result<MemoryEstimate, TechniqueError> {
+        let generations = 1 + u64::from(self.refine_ticks > 0);
+        let cache_layers = if self.mode == CacheMode::Temporal { generations } else { 1 };
         let vpls = u64::from(self.vpls);
         let samples = pixels.saturating_mul(u64::from(self.spp));
-        let records = samples * if self.audit { 2 } else { 1 };
+        let records = samples * (cache_layers + u64::from(self.audit));
         // The caches keep each sample's hit, irradiance and record weights (`pixels.rs`),
         // estimated at `WEIGHTS_PER_SAMPLE` each.
-        let kept = if self.mode == CacheMode::Igi { 0 } else { samples };
+        let kept = if self.mode == CacheMode::Igi { 0 } else { samples * cache_layers };
         let per_sample = super::pixels::STATE_BYTES + WEIGHTS_PER_SAMPLE * super::pixels::WEIGHT_BYTES;
         let record = size::<Record>() + 4 * vpls + super::cache::KEY_BYTES;
-        let grid = if self.mode == CacheMode::Igi { 0 } else { 1 + u64::from(self.audit) };
+        let grid = if self.mode == CacheMode::Igi { 0 } else { cache_layers + u64::from(self.audit) };
         product_sum(
             "vpls",
-            &[(vpls, size::<Vpl>()), (records, record), (kept, per_sample), (grid, super::grid::MAX_EMPTY_BYTES)],
+            &[
+                (vpls * generations, size::<Vpl>()),
+                (records, record),
+                (kept, per_sample),
+                (grid, super::grid::MAX_EMPTY_BYTES),
+            ],
         )
     }
 
@@ -131,6 +150,9 @@ impl InstantCacheConfig {
         if self.spp == 0 || self.spp > crate::technique::path::MAX_SPP {
             return bad("spp", &format!("must lie in 1..={}", crate::technique::path::MAX_SPP));
         }
+        if self.refine_ticks > MAX_REFINE_TICKS {
+            return bad("refine_ticks", &format!("must lie in 0..={MAX_REFINE_TICKS}"));
+        }
         if self.max_age == 0 {
             return bad("max_age", "must be at least 1 tick");
         }
@@ -141,6 +163,11 @@ impl InstantCacheConfig {
 /// Per-tick figures of `instant_cache`.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct InstantCacheStats {
+    /// The VPL generation this tick rendered: 0 is the resident one, which follows changes;
+    /// 1..=`refine_ticks` are a still view's refinements (`idle` once they are done).
+    pub generation: u32,
+    /// A still view whose refinement is done: the tick rendered nothing.
+    pub idle: bool,
     pub vpls: u64,
     /// Photon paths the VPLs come from (their light is divided among these).
     pub vpl_paths: u64,

@@ -6,6 +6,7 @@ use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
 use crate::core::Rgb;
 use crate::scene::SceneAccel;
 use crate::technique::camera_chain::DiffuseHit;
+use crate::technique::RenderContext;
 use rayon::prelude::*;
 
 /// Neighbours must have normals within this cosine and camera distances within this fraction
@@ -13,9 +14,38 @@ use rayon::prelude::*;
 const SAME_SURFACE_COSINE: f32 = 0.9;
 const SAME_SURFACE_DEPTH: f32 = 0.1;
 
+/// Indirect irradiance per pixel (`hits`: each pixel's diffuse hit, in raster order) by the
+/// n×n interleaved gather and the discontinuity buffer. Returns it and the visibility rays.
+pub fn indirect(
+    ctx: &RenderContext,
+    vpls: &[Vpl],
+    hits: &[Option<DiffuseHit>],
+    n: usize,
+    min_distance: f32,
+) -> (Vec<Option<Rgb>>, u64) {
+    let width = ctx.scene.camera.width as usize;
+    let camera = ctx.scene.camera.ray(0.5 * width as f32, 0.0).origin;
+    let hits: Vec<Option<(DiffuseHit, f32)>> = hits.iter().map(|h| h.map(|h| (h, (h.p - camera).length()))).collect();
+    let gathered: Vec<(Rgb, u64)> = hits
+        .par_iter()
+        .enumerate()
+        .map(|(i, h)| match h {
+            Some((hit, _)) => {
+                let subset = (i % width) % n + n * ((i / width) % n);
+                subset_irradiance(ctx.accel, vpls, hit, subset, n * n, min_distance)
+            }
+            None => (Rgb::BLACK, 0),
+        })
+        .collect();
+    let rays = gathered.iter().map(|g| g.1).sum::<u64>();
+    let raw: Vec<Rgb> = gathered.into_iter().map(|g| g.0).collect();
+    let filtered = filter(&hits, &raw, width, n);
+    (hits.iter().zip(filtered).map(|(h, e)| h.map(|_| e)).collect(), rays)
+}
+
 /// Irradiance at `hit` from the VPLs of interleaving subset `subset` of `n²`, scaled by n² so
 /// it estimates the sum over all VPLs. Returns it and the visibility rays traced.
-pub fn subset_irradiance(
+fn subset_irradiance(
     accel: &SceneAccel,
     vpls: &[Vpl],
     hit: &DiffuseHit,
@@ -39,7 +69,7 @@ pub fn subset_irradiance(
 /// The discontinuity buffer: each pixel's irradiance averaged with the neighbours of its n×n
 /// window (all n² subsets) that lie on the same surface. `hits[i]` is pixel i's diffuse hit
 /// and its distance from the camera; `raw[i]` its subset irradiance.
-pub fn filter(hits: &[Option<(DiffuseHit, f32)>], raw: &[Rgb], width: usize, n: usize) -> Vec<Rgb> {
+fn filter(hits: &[Option<(DiffuseHit, f32)>], raw: &[Rgb], width: usize, n: usize) -> Vec<Rgb> {
     let height = hits.len() / width.max(1);
     let lo = (n as isize - 1) / 2;
     (0..hits.len())

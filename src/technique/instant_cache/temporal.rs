@@ -31,6 +31,7 @@
 //! whichever way they are classified, except when a VPL's intensity changes, and then such a
 //! ray is retraced.
 use super::cache::{contribution, Record};
+use super::config::InstantCacheStats;
 use super::rgbe;
 use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
 use crate::embree::{CommittedScene, EmbreeError};
@@ -108,6 +109,21 @@ pub struct Refresh {
     /// Contributions cases 3 and 4 changed.
     pub occluded: u64,
     pub deoccluded: u64,
+}
+
+impl Refresh {
+    /// Adds one record's re-evaluation to the tick's figures.
+    pub fn count(self, stats: &mut InstantCacheStats) {
+        stats.records_refreshed += 1;
+        stats.records_invalidated_vpl += u64::from(self.vpl_rays + self.reweighted > 0);
+        stats.records_invalidated_occluded += u64::from(self.occluded > 0);
+        stats.records_invalidated_deoccluded += u64::from(self.deoccluded > 0);
+        stats.visibility_rays_vpl += self.vpl_rays;
+        stats.visibility_rays_occlusion += self.occlusion_rays;
+        stats.occlusion_box_tests += self.occlusion_box_tests;
+        stats.visibility_rays_deocclusion += self.deocclusion_rays;
+        stats.deocclusion_box_tests += self.deocclusion_box_tests;
+    }
 }
 
 impl std::ops::AddAssign for Refresh {
