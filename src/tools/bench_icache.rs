@@ -54,6 +54,10 @@ pub struct Summary {
     pub records_median: f64,
     pub records_created_median: f64,
     pub memory_bytes: u64,
+    /// Frames of a still view that rested (refinement done: `idle`), and their indirect
+    /// milliseconds (median); the medians above include them.
+    pub resting_frames: usize,
+    pub resting_indirect_ms_median: f64,
     /// With `--audit`: records, over all frames, that differed from a fresh computation.
     pub audit_mismatched: u64,
     pub audit_off_surface: u64,
@@ -124,6 +128,7 @@ pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
         let col = |f: &dyn Fn(&FrameFigures) -> f64| figures.iter().map(f).collect::<Vec<f64>>();
         let (ticks, indirect) = (col(&|f| f.tick_ms), col(&|f| f.indirect_ms));
         let last = figures.last().map(|f| &f.stats);
+        let resting: Vec<f64> = figures.iter().filter(|f| f.stats.idle).map(|f| f.indirect_ms).collect();
         let summary = Summary {
             tick_ms_median: quantile(&ticks, 0.5),
             tick_ms_p95: quantile(&ticks, 0.95),
@@ -134,6 +139,8 @@ pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
             records_median: quantile(&col(&|f| f.records as f64), 0.5),
             records_created_median: quantile(&col(&|f| f.records_created as f64), 0.5),
             memory_bytes: last.map_or(0, |s| s.memory.total_bytes),
+            resting_frames: resting.len(),
+            resting_indirect_ms_median: quantile(&resting, 0.5),
             audit_mismatched: figures.iter().map(|f| f.stats.audit_mismatched).sum(),
             audit_off_surface: figures.iter().map(|f| f.stats.audit_off_surface).sum(),
         };
@@ -171,6 +178,15 @@ pub fn print_table(r: &IcacheReport, audit: bool) {
             s.records_median,
             s.records_created_median,
             s.memory_bytes as f64 / 1048576.0
+        );
+    }
+    for m in r.modes.iter().filter(|m| m.summary.resting_frames > 0) {
+        println!(
+            "  {}: a still view refined for {} frames, then rested for {} (indirect {:.3} ms, median)",
+            m.mode,
+            m.frames.len() - m.summary.resting_frames,
+            m.summary.resting_frames,
+            m.summary.resting_indirect_ms_median
         );
     }
     let find = |name: &str| r.modes.iter().find(|m| m.mode == name).map(|m| &m.summary);

@@ -3,8 +3,10 @@
 //!   Pareto front joined;
 //! - `rays_per_frame`: rays traced per frame over the run, per configuration (Moreau et al.'s
 //!   Figure 7);
+//! - `error_by_frame`: relMSE of each measured frame, per configuration: how a still view
+//!   converges, or how error builds up over an animation;
 //! - `stage_times`: median time per tick stage, stacked, per configuration (their Figure 8).
-use super::ErrorReport;
+use super::{ErrorReport, FrameResult};
 use anyhow::{anyhow, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -51,7 +53,9 @@ fn both<P: Plot>(dir: &Path, stem: &str, plot: &P) -> Result<()> {
 
 pub fn write_all(dir: &Path, r: &ErrorReport) -> Result<()> {
     both(dir, "time_vs_error", &TimeVsError(r))?;
-    both(dir, "rays_per_frame", &RaysPerFrame(r))?;
+    both(dir, "rays_per_frame", &PerFrame { report: r, caption: "Rays traced per frame", unit: "rays", value: rays })?;
+    let error = PerFrame { report: r, caption: "Error of each measured frame", unit: "relMSE", value: rel_mse };
+    both(dir, "error_by_frame", &error)?;
     both(dir, "stage_times", &StageTimes(r))?;
     Ok(())
 }
@@ -68,7 +72,22 @@ fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(chart: &mut ChartCont
 }
 
 struct TimeVsError<'a>(&'a ErrorReport);
-struct RaysPerFrame<'a>(&'a ErrorReport);
+/// A value of each frame, per configuration, on a log scale.
+struct PerFrame<'a> {
+    report: &'a ErrorReport,
+    caption: &'static str,
+    unit: &'static str,
+    /// The frame's value, if it has one.
+    value: fn(&FrameResult) -> Option<f64>,
+}
+
+fn rays(f: &FrameResult) -> Option<f64> {
+    Some((f.rays as f64).max(1.0))
+}
+
+fn rel_mse(f: &FrameResult) -> Option<f64> {
+    f.error.as_ref().map(|e| e.rel_mse).filter(|e| *e > 0.0)
+}
 struct StageTimes<'a>(&'a ErrorReport);
 
 impl Plot for TimeVsError<'_> {
@@ -116,30 +135,33 @@ impl Plot for TimeVsError<'_> {
     }
 }
 
-impl Plot for RaysPerFrame<'_> {
+impl Plot for PerFrame<'_> {
     fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<()> {
-        let r = self.0;
+        let r = self.report;
         area.fill(&WHITE).map_err(err)?;
         let frames = r.frames.iter().map(|f| f.frame).max().unwrap_or(0) as f64 + 1.0;
-        let rays_max = r.frames.iter().map(|f| f.rays).max().unwrap_or(1).max(1) as f64 * 2.0;
+        let values: Vec<f64> = r.frames.iter().filter_map(self.value).collect();
+        let hi = values.iter().copied().fold(f64::MIN_POSITIVE, f64::max) * 2.0;
+        let lo = values.iter().copied().fold(hi, f64::min) / 2.0;
         let mut chart = ChartBuilder::on(area)
-            .caption("Rays traced per frame", ("sans-serif", 22))
+            .caption(self.caption, ("sans-serif", 22))
             .margin(16)
             .x_label_area_size(44)
             .y_label_area_size(72)
-            .build_cartesian_2d(0.0..frames, (1.0..rays_max).log_scale())
+            .build_cartesian_2d(0.0..frames, (lo..hi).log_scale())
             .map_err(err)?;
         chart
             .configure_mesh()
             .x_desc("frame")
-            .y_desc("rays (log)")
+            .y_desc(format!("{} (log)", self.unit))
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()
             .map_err(err)?;
         for (i, s) in r.summaries.iter().enumerate() {
             let c = colour(i);
+            let value = self.value;
             let points =
-                r.frames.iter().filter(|f| f.config == s.config).map(|f| (f.frame as f64, (f.rays as f64).max(1.0)));
+                r.frames.iter().filter(|f| f.config == s.config).filter_map(|f| Some((f.frame as f64, value(f)?)));
             chart
                 .draw_series(LineSeries::new(points, ShapeStyle::from(&c).stroke_width(2)))
                 .map_err(err)?

@@ -152,7 +152,7 @@ fn markdown(r: &ErrorReport) -> String {
         "\n★ marks the Pareto front of tick time against HDR-FLIP. Times are medians over frames \
          (each the median of the repeats); errors are means over the measured frames.\n\n\
          ![tick time against error](time_vs_error.png)\n\n![rays per frame](rays_per_frame.png)\n\n\
-         ![stage times](stage_times.png)\n\nWorst frames, FLIP error in magma (black: none, yellow: \
+         ![error by frame](error_by_frame.png)\n\n![stage times](stage_times.png)\n\nWorst frames, FLIP error in magma (black: none, yellow: \
          large):\n\n",
     );
     for s in &r.summaries {
