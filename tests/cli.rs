@@ -318,6 +318,8 @@ fn bench_error_writes_its_files_and_reuses_cached_references() {
         "time_vs_error.svg",
         "rays_per_frame.png",
         "rays_per_frame.svg",
+        "error_by_frame.png",
+        "error_by_frame.svg",
         "stage_times.png",
         "stage_times.svg",
         "errors/path_spp_2.png",
