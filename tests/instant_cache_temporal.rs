@@ -1,6 +1,7 @@
 //! `instant_cache` mode `temporal`: invalidation is exact (every record equals a fresh
 //! computation after each of Algorithm 1's cases), a static scene costs nothing once the cache
-//! has settled, moving an object away and back restores the cache, and a still view's
+//! has settled, moving an object away and back restores the cache, a colour edit reweights
+//! VPLs rather than retracing them, and a still view's
 //! refinement leaves the resident cache as it was.
 mod common;
 use common::*;
@@ -318,5 +319,41 @@ fn refinement_leaves_the_resident_cache_as_it_was() {
         assert!(r.records_refreshed > 0, "the move re-evaluated nothing: {r:?}");
         assert_eq!((r.records_created, r.records_aged_out), (t.records_created, t.records_aged_out), "{r:?} vs {t:?}");
         assert_eq!(refined.image.pixels, twin.image.pixels, "refinement changed the resident generation");
+    });
+}
+
+#[test]
+fn a_colour_edit_reweights_vpls_instead_of_retracing_them() {
+    // Property: an edit of the red wall's green and blue that keeps its largest component (so
+    // Russian roulette, which uses it, ends the same paths) moves no VPL: those lit through the
+    // wall only change intensity, and a record keeps their visibility. Only VPLs of paths the
+    // new path count adds are traced (ρ_S, hence the count, moves a little). The records stay
+    // exact. Control: raising the largest component changes where paths end, and VPLs are
+    // invalidated and traced.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    let recolour = |reflectance: [f32; 3]| -> Edit {
+        serde_json::from_value(json!({"target": "material", "name": "red",
+            "material": {"type": "diffuse", "reflectance": reflectance}}))
+        .unwrap()
+    };
+    pool.install(|| {
+        let mut s = Session::new(room(HOVERING), &temporal(Reevaluation::Immediate), 5, &device).expect("session");
+        let first = stats(&s.tick().unwrap());
+        s.queue_edits(vec![recolour([0.7, 0.35, 0.2])]).unwrap();
+        let tint = stats(&s.tick().unwrap());
+        assert_exact("tint", &tint);
+        assert!(tint.vpls_reweighted > 0 && tint.records_invalidated_vpl > 0, "the edit changed no VPL: {tint:?}");
+        assert!(10 * tint.vpls_invalidated <= tint.vpls, "most VPLs were shot anew: {tint:?}");
+        assert!(
+            10 * tint.visibility_rays <= first.visibility_rays,
+            "{} rays against {}",
+            tint.visibility_rays,
+            first.visibility_rays
+        );
+        s.queue_edits(vec![recolour([0.9, 0.35, 0.2])]).unwrap();
+        let brighter = stats(&s.tick().unwrap());
+        assert_exact("brighter", &brighter);
+        assert!(brighter.vpls_invalidated > 0 && brighter.visibility_rays > tint.visibility_rays, "{brighter:?}");
     });
 }
