@@ -1,8 +1,8 @@
 //! `instant_cache` mode `temporal`: invalidation is exact (every record equals a fresh
 //! computation after each of Algorithm 1's cases), a static scene costs nothing once the cache
 //! has settled, moving an object away and back restores the cache, a colour edit reweights
-//! VPLs rather than retracing them, and a still view's
-//! refinement leaves the resident cache as it was.
+//! VPLs rather than retracing them, and a still view's refinement leaves the resident cache as
+//! it was.
 mod common;
 use common::*;
 use relume::embree::Device;
