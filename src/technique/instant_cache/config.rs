@@ -179,8 +179,8 @@ pub struct InstantCacheStats {
     pub vpls_reused: u64,
     pub vpls_reweighted: u64,
     pub vpls_invalidated: u64,
-    /// Records in the cache after this tick, made this tick, and kept from earlier ticks and
-    /// interpolated this tick.
+    /// Records in the resident cache after this tick; records made this tick (in a refinement
+    /// generation's cache on a refining tick), and kept from earlier ticks and interpolated.
     pub records: u64,
     pub records_created: u64,
     pub records_reused: u64,

@@ -324,7 +324,6 @@ impl InstantCache {
             if let Some(kept) = pixels::all_kept(&states, &hits) {
                 self.pending.records_reused += mark_used(cache, &states, cache.records.len(), ctx.tick, true);
                 self.pending.samples_reused += hits.iter().filter(|h| h.is_some()).count() as u64;
-                self.pending.records = cache.records.len() as u64;
                 self.samples[k] = states;
                 return kept;
             }
@@ -349,7 +348,6 @@ impl InstantCache {
                 w.count(stats);
             }
         }
-        stats.records = cache.records.len() as u64;
         stats.samples_reused += reused;
         stats.samples_interpolated += states.iter().filter(|s| s.hit.is_some()).count() as u64 - reused;
         stats.samples_looked_up += looked_up;
@@ -573,6 +571,7 @@ impl Technique for InstantCache {
             TickKind::Idle => {}
         }
         if self.config.mode != CacheMode::Igi {
+            self.pending.records = self.cache.as_ref().map_or(0, |c| c.records.len() as u64);
             self.pending.memory.set("cache", self.cache.as_ref().map_or(0, Cache::memory_bytes));
             self.pending.memory.set("samples", samples_bytes(&self.samples));
         }
