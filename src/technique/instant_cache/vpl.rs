@@ -107,9 +107,10 @@ pub struct Shot {
 /// successive runs of points (`first` = generation × paths), so G generations together are the
 /// first G × paths points: one VPL set G times larger. The path count, not the VPL count, is
 /// fixed: stopping when a VPL budget is reached would divide by a random path count, and the
-/// estimate would be biased upwards (measured: +110% at 64 VPLs in the furnace). `max_vpls` is only a memory guard, far above
-/// the expected count: if it is reached, the path in flight is dropped and the light is divided
-/// among the paths completed before it (a shorter Halton prefix), never among paths not shot.
+/// estimate would be biased upwards (measured: +110% at 64 VPLs in the furnace). `max_vpls` is
+/// only a memory guard, far above the expected count: if it is reached, the path in flight is
+/// dropped and the light is divided among the paths completed before it (a shorter Halton
+/// prefix), never among paths not shot.
 pub fn shoot(scene: &Scene, accel: &SceneAccel, first: u64, paths: u64, max_vpls: usize, max_bounces: u32) -> Shot {
     let mut shot = Shot { paths, ..Shot::default() };
     let Some(select) = &scene.light_selection else { return shot };
