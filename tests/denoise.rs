@@ -175,3 +175,37 @@ fn kept_auxiliary_images_denoise_like_freshly_traced_ones() {
     assert!(worst < 1e-5, "kept auxiliary images differ from fresh ones by {worst}");
     assert_ne!(denoised, &colour_only, "control: the auxiliary images change nothing");
 }
+
+/// A tick that changes nothing in the film is not denoised again: an `instant_cache` view at
+/// rest (refinement done, no pass added) returns the last output, bit for bit, with
+/// `denoise_reused`. Every tick before it added a pass and was denoised; so is the tick after
+/// a change. Control: `path` adds a pass every tick and is denoised every tick.
+#[test]
+fn an_unchanged_film_is_not_denoised_again() {
+    let settings = DenoiseSettings { quality: DenoiseQuality::Fast, aux: false };
+    let device = Device::new(2).expect("device");
+    let pool = thread_pool(2).expect("pool");
+    pool.install(|| {
+        let run = |spec: &str| -> Vec<Frame> {
+            let mut scene = cornell();
+            scene.set_resolution(32, 32);
+            let config = TechniqueConfig::from_spec(spec).expect("spec");
+            let mut session = Session::new(scene, &config, 1, &device).expect("session");
+            session.enable_denoise(settings).expect("OIDN");
+            let mut frames: Vec<Frame> = (0..5).map(|_| session.tick().expect("tick")).collect();
+            session.queue_edits(vec![common::camera_dolly()]).expect("edit");
+            frames.push(session.tick().expect("tick"));
+            frames
+        };
+        let resting = run("instant_cache:temporal:refine_ticks=2");
+        let reused: Vec<bool> = resting.iter().map(|f| f.stats.denoise_reused).collect();
+        assert_eq!(reused, [false, false, false, true, true, false], "ticks 3 and 4 rest");
+        let spp: Vec<u32> = resting.iter().map(|f| f.spp).collect();
+        assert_eq!(spp, [1, 2, 3, 3, 3, 1], "the resting ticks added a pass");
+        for f in &resting[3..5] {
+            assert_eq!(f.denoised.as_ref().map(|d| &d.pixels), resting[2].denoised.as_ref().map(|d| &d.pixels));
+        }
+        let path = run("path:spp=1");
+        assert!(path.iter().all(|f| !f.stats.denoise_reused), "path's film changes every tick");
+    });
+}

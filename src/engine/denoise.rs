@@ -10,7 +10,7 @@
 //! the camera, an object or a material changes: in a still scene it costs only the filter.
 use crate::core::rng::mix64;
 use crate::core::{Rgb, Rng};
-use crate::film::{AuxFilm, AuxSample, DenoiseError, DenoiseSettings, Denoiser, LinearImage};
+use crate::film::{AuxFilm, AuxSample, DenoiseError, DenoiseSettings, Denoiser, FilmVersion, LinearImage};
 use crate::scene::edits::SceneDelta;
 use crate::scene::{Scene, SceneAccel};
 use crate::technique::camera_chain;
@@ -26,6 +26,8 @@ pub struct DenoiseStage {
     aux: AuxFilm,
     /// The denoiser holds the current auxiliary images (none added or reset since it got them).
     aux_sent: bool,
+    /// The last tick's output and the version of the film it came from.
+    last: Option<(FilmVersion, LinearImage)>,
 }
 
 /// What one tick's denoise stage traced.
@@ -33,6 +35,9 @@ pub struct DenoiseStage {
 pub struct AuxWork {
     /// Camera and specular-chain rays of the auxiliary pass (0 once the images are converged).
     pub rays: u64,
+    /// Nothing was traced or denoised: the film and the auxiliary images were as they were at
+    /// the last tick, so its output stands.
+    pub reused: bool,
 }
 
 impl DenoiseStage {
@@ -41,6 +46,7 @@ impl DenoiseStage {
             denoiser: Denoiser::new(settings, width, height)?,
             aux: AuxFilm::new(width, height),
             aux_sent: false,
+            last: None,
         })
     }
 
@@ -84,6 +90,25 @@ impl DenoiseStage {
         let denoised = self.denoiser.denoise(image, aux)?;
         self.aux_sent = true;
         Ok((denoised, work))
+    }
+
+    /// A tick's denoise: [`DenoiseStage::run`] with one pass, unless the film is at the last
+    /// tick's `version` and the auxiliary images are done and sent; then that tick's output.
+    pub fn tick(
+        &mut self,
+        scene: &Scene,
+        accel: &SceneAccel,
+        seed: u64,
+        image: &LinearImage,
+        version: FilmVersion,
+    ) -> Result<(LinearImage, AuxWork), DenoiseError> {
+        let aux_done = self.aux_sent && (!self.settings().aux || self.aux.converged());
+        if let Some((_, output)) = self.last.as_ref().filter(|(v, _)| aux_done && *v == version) {
+            return Ok((output.clone(), AuxWork { rays: 0, reused: true }));
+        }
+        let (output, work) = self.run(scene, accel, seed, image, 1)?;
+        self.last = Some((version, output.clone()));
+        Ok((output, work))
     }
 
     /// One jittered auxiliary sample per pixel; returns the rays traced.

@@ -12,14 +12,15 @@
 //! 6. **Resolve** the film into a linear image; encoding happens where the frame is consumed.
 //! 7. **Denoise**, when the session asks for it ([`Session::enable_denoise`]): OIDN on the
 //!    resolved image, guided by auxiliary images ([`DenoiseStage`]); the raw image stays in the
-//!    frame beside the denoised one.
+//!    frame beside the denoised one. A film unchanged since the last tick ([`Film::version`])
+//!    is not denoised again: the last output stands (`denoise_reused`).
 //!
 //! Nothing traces while Embree commits: the phases run in order inside one session. The engine
 //! never touches tokio or axum; callers run `tick` on a rayon pool made by [`thread_pool`].
 mod denoise;
 mod stats;
 
-pub use denoise::DenoiseStage;
+pub use denoise::{AuxWork, DenoiseStage};
 pub use stats::{PhaseTimes, TickStats};
 
 use crate::embree::{self, Device, EmbreeError};
@@ -262,7 +263,7 @@ impl Session {
 
         // Denoise, keeping the raw image.
         let t = Instant::now();
-        let (denoised, aux_rays) = self.denoise_step(&image)?;
+        let (denoised, aux) = self.denoise_step(&image)?;
         times.denoise_ms = if self.denoise.is_some() { ms(t) } else { 0.0 };
         times.total_ms = ms(start);
 
@@ -279,7 +280,8 @@ impl Session {
             spp: self.film.passes,
             paths_per_pixel: self.film.mean_paths_per_pixel(),
             accumulation_id: self.film.accumulation_id,
-            aux_rays,
+            aux_rays: aux.rays,
+            denoise_reused: aux.reused,
             restored: std::mem::take(&mut self.restored),
             detail: render.detail,
         };
@@ -296,13 +298,13 @@ impl Session {
     }
 
     /// The denoised image and the auxiliary pass's rays, when the session denoises.
-    fn denoise_step(&mut self, image: &LinearImage) -> Result<(Option<LinearImage>, u64), EngineError> {
+    fn denoise_step(&mut self, image: &LinearImage) -> Result<(Option<LinearImage>, AuxWork), EngineError> {
         match &mut self.denoise {
             Some(stage) => {
-                let (denoised, work) = stage.run(&self.scene, &self.accel, self.seed, image, 1)?;
-                Ok((Some(denoised), work.rays))
+                let (denoised, work) = stage.tick(&self.scene, &self.accel, self.seed, image, self.film.version())?;
+                Ok((Some(denoised), work))
             }
-            None => Ok((None, 0)),
+            None => Ok((None, AuxWork::default())),
         }
     }
 }

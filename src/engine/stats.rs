@@ -43,6 +43,10 @@ pub struct TickStats {
     /// when the session does not denoise).
     #[serde(default)]
     pub aux_rays: u64,
+    /// True when the denoise stage returned the last tick's output: nothing in the film (nor in
+    /// the auxiliary images) changed since. Absent otherwise.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub denoise_reused: bool,
     /// True on the first tick after a restore from a snapshot: the technique rebuilt (retraced)
     /// its state. Absent otherwise.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]

@@ -45,6 +45,16 @@ pub struct Film {
     /// Light-tracing splats: per pixel, the sum over passes of each pass's splatted estimate,
     /// so the splatted part of a pixel is `splats / passes`. Empty until a technique splats.
     splats: Vec<[f64; 3]>,
+    /// Bumped by every method that may change a pixel or a splat.
+    writes: u64,
+}
+
+/// What a film's image depends on: two equal versions of one film resolve to the same image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FilmVersion {
+    writes: u64,
+    passes: u32,
+    accumulation_id: u64,
 }
 
 impl Film {
@@ -61,6 +71,7 @@ impl Film {
             accumulation_id: 0,
             passes: 0,
             splats: Vec::new(),
+            writes: 0,
         }
     }
 
@@ -70,6 +81,7 @@ impl Film {
         self.splats.iter_mut().for_each(|s| *s = [0.0; 3]);
         self.accumulation_id += 1;
         self.passes = 0;
+        self.writes += 1;
     }
 
     /// Restarts the accumulation of only the listed pixels, each with one estimate: for a
@@ -87,6 +99,7 @@ impl Film {
         }
         self.accumulation_id += 1;
         self.passes = 1;
+        self.writes += 1;
     }
 
     /// Runs `f(first_pixel_index, chunk)` on consecutive chunks of `chunk_len` pixels in
@@ -98,6 +111,7 @@ impl Film {
         F: Fn(usize, &mut [PixelAccum]) -> T + Sync + Send,
         M: Fn(T, T) -> T + Sync + Send,
     {
+        self.writes += 1;
         self.pixels
             .par_chunks_mut(chunk_len.max(1))
             .enumerate()
@@ -139,12 +153,18 @@ impl Film {
         if self.splats.is_empty() {
             self.splats = vec![[0.0; 3]; self.pixels.len()];
         }
+        self.writes += 1;
         for &(index, v) in splats {
             let s = &mut self.splats[index as usize];
             s[0] += v.r as f64;
             s[1] += v.g as f64;
             s[2] += v.b as f64;
         }
+    }
+
+    /// The film's version: it changes whenever its image may have.
+    pub fn version(&self) -> FilmVersion {
+        FilmVersion { writes: self.writes, passes: self.passes, accumulation_id: self.accumulation_id }
     }
 
     /// Bytes the splat buffer holds (0 until a technique splats).

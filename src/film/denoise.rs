@@ -82,7 +82,8 @@ impl DenoiseSettings {
     /// Bytes the stage holds at `pixels` pixels: OIDN's filter, its scratch tensors and
     /// buffers, and the auxiliary film. Measured with `relume render --denoise=high` (maximum
     /// resident set, against the same render without it): +51 MB at 256², +711 MB at 1024²,
-    /// so about 680 bytes a pixel; rounded up here.
+    /// so about 680 bytes a pixel, plus the last output kept for unchanged ticks (12 bytes);
+    /// rounded up here.
     pub fn resident_estimate(&self, pixels: u64) -> u64 {
         (32 << 20) + pixels.saturating_mul(768)
     }

@@ -11,7 +11,7 @@ mod encode;
 mod filter;
 mod image;
 
-pub use accum::{Film, PixelAccum};
+pub use accum::{Film, FilmVersion, PixelAccum};
 pub use aux::{AuxFilm, AuxImages, AuxSample};
 pub use denoise::{DenoiseError, DenoiseQuality, DenoiseSettings, Denoiser};
 pub use encode::{encode, write_image, EncodeError, ImageFormat};

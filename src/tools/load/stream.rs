@@ -280,6 +280,7 @@ mod tests {
             paths_per_pixel: 1.0,
             accumulation_id: 0,
             aux_rays: 0,
+            denoise_reused: false,
             restored: false,
             detail: crate::technique::TechniqueStats::Path(Default::default()),
         };
