@@ -30,7 +30,7 @@ pub struct DenoiseStage {
     last: Option<(FilmVersion, LinearImage)>,
 }
 
-/// What one tick's denoise stage traced.
+/// What one tick's denoise stage did.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct AuxWork {
     /// Camera and specular-chain rays of the auxiliary pass (0 once the images are converged).

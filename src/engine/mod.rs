@@ -297,7 +297,8 @@ impl Session {
         Ok(frame)
     }
 
-    /// The denoised image and the auxiliary pass's rays, when the session denoises.
+    /// The denoised image when the session denoises, and what the stage did (its auxiliary
+    /// rays; whether it reused the last output because the film had not changed).
     fn denoise_step(&mut self, image: &LinearImage) -> Result<(Option<LinearImage>, AuxWork), EngineError> {
         match &mut self.denoise {
             Some(stage) => {
