@@ -199,6 +199,27 @@ fn light_selection_follows_power() {
 }
 
 #[test]
+fn the_remapped_number_is_uniform_within_each_item() {
+    // Light sampling reuses it to pick a point on the chosen triangle, so it must be a fresh
+    // uniform number in [0, 1) within every item, a single item included.
+    for weights in [&[1.0, 3.0, 0.0, 6.0][..], &[2.5]] {
+        let d = sampling::DiscreteDistribution::new(weights).unwrap();
+        let mut rng = Rng::new(3, 4);
+        let mut bins = vec![[0u64; 10]; weights.len()];
+        for _ in 0..SAMPLES {
+            let (i, _, v) = d.sample(rng.next_f32());
+            assert!((0.0..1.0).contains(&v), "remapped {v}");
+            bins[i][(v * 10.0) as usize] += 1;
+        }
+        for (i, b) in bins.iter().enumerate().filter(|(i, _)| weights[*i] > 0.0) {
+            let n = b.iter().sum::<u64>() as usize;
+            let p = chi2_p_value(b, &[0.1; 10], n);
+            assert!(p > SIGNIFICANCE, "item {i} of {weights:?}: p = {p}, bins {b:?}");
+        }
+    }
+}
+
+#[test]
 fn triangle_sampling_is_uniform_by_area() {
     // Uniform barycentrics: the fraction landing in the sub-triangle b1 + b2 < 1/2 is 1/4.
     let mut rng = Rng::new(5, 5);

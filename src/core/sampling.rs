@@ -98,6 +98,9 @@ pub fn power_heuristic(pdf_this: f32, pdf_other: f32) -> f32 {
 pub struct DiscreteDistribution {
     cdf: Vec<f32>,
     total: f32,
+    /// Per item: its probability and the reciprocal of its weight (0 for a zero weight),
+    /// worked out once so that sampling divides nothing.
+    buckets: Vec<(f32, f32)>,
 }
 
 impl DiscreteDistribution {
@@ -110,7 +113,14 @@ impl DiscreteDistribution {
             acc += if w.is_finite() && w > 0.0 { w as f64 } else { 0.0 };
             cdf.push(acc as f32);
         }
-        (acc > 0.0).then_some(DiscreteDistribution { cdf, total: acc as f32 })
+        let total = acc as f32;
+        let buckets = (0..cdf.len())
+            .map(|i| {
+                let w = cdf[i] - if i == 0 { 0.0 } else { cdf[i - 1] };
+                (w / total, if w > 0.0 { 1.0 / w } else { 0.0 })
+            })
+            .collect();
+        (acc > 0.0).then_some(DiscreteDistribution { cdf, total, buckets })
     }
 
     pub fn len(&self) -> usize {
@@ -124,16 +134,18 @@ impl DiscreteDistribution {
     /// Returns `(index, probability, u remapped to [0,1) within the chosen bucket)`.
     pub fn sample(&self, u: f32) -> (usize, f32, f32) {
         let target = u * self.total;
-        let i = self.cdf.partition_point(|&c| c <= target).min(self.cdf.len() - 1);
+        let i = match self.cdf.len() {
+            1 => 0,
+            n => self.cdf.partition_point(|&c| c <= target).min(n - 1),
+        };
         let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
-        let w = self.cdf[i] - lo;
-        let remapped = if w > 0.0 { ((target - lo) / w).clamp(0.0, 1.0 - f32::EPSILON) } else { 0.0 };
-        (i, w / self.total, remapped)
+        let (pmf, inv_width) = self.buckets[i];
+        let remapped = if inv_width > 0.0 { ((target - lo) * inv_width).clamp(0.0, 1.0 - f32::EPSILON) } else { 0.0 };
+        (i, pmf, remapped)
     }
 
     pub fn pmf(&self, i: usize) -> f32 {
-        let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
-        (self.cdf[i] - lo) / self.total
+        self.buckets[i].0
     }
 }
 
