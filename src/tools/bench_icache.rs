@@ -49,6 +49,10 @@ pub struct Summary {
     pub tick_ms_p95: f64,
     pub indirect_ms_median: f64,
     pub indirect_ms_p95: f64,
+    /// The indirect time by stage (medians of `vpl_ms`, `invalidate_ms` and `indirect_ms`):
+    /// shooting VPLs, the start-of-tick invalidation (`temporal`'s ageing, case 5 and immediate
+    /// re-evaluation), and the cache's or the gather's work for the pixels.
+    pub stage_ms_median: StageSplit,
     pub rays_median: f64,
     pub visibility_rays_median: f64,
     pub records_median: f64,
@@ -61,6 +65,13 @@ pub struct Summary {
     /// With `--audit`: records, over all frames, that differed from a fresh computation.
     pub audit_mismatched: u64,
     pub audit_off_surface: u64,
+}
+
+#[derive(Debug, Serialize)]
+pub struct StageSplit {
+    pub vpls: f64,
+    pub invalidate: f64,
+    pub pixels: f64,
 }
 
 #[derive(Debug, Serialize)]
@@ -134,6 +145,11 @@ pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
             tick_ms_p95: quantile(&ticks, 0.95),
             indirect_ms_median: quantile(&indirect, 0.5),
             indirect_ms_p95: quantile(&indirect, 0.95),
+            stage_ms_median: StageSplit {
+                vpls: quantile(&col(&|f| f.stats.vpl_ms), 0.5),
+                invalidate: quantile(&col(&|f| f.stats.invalidate_ms), 0.5),
+                pixels: quantile(&col(&|f| f.stats.indirect_ms), 0.5),
+            },
             rays_median: quantile(&col(&|f| f.rays as f64), 0.5),
             visibility_rays_median: quantile(&col(&|f| f.visibility_rays as f64), 0.5),
             records_median: quantile(&col(&|f| f.records as f64), 0.5),
@@ -179,6 +195,11 @@ pub fn print_table(r: &IcacheReport, audit: bool) {
             s.records_created_median,
             s.memory_bytes as f64 / 1048576.0
         );
+    }
+    println!("  indirect ms by stage (medians)  shoot VPLs  invalidate  pixels");
+    for m in &r.modes {
+        let st = &m.summary.stage_ms_median;
+        println!("  {:<30} {:>11.2} {:>11.2} {:>7.2}", m.mode, st.vpls, st.invalidate, st.pixels);
     }
     for m in r.modes.iter().filter(|m| m.summary.resting_frames > 0) {
         println!(
