@@ -12,7 +12,8 @@
 //!   contribution unless case 3 finds it blocked: its G′ is not worked out again.
 //! - **Case 4** (ray deoccluded): a ray that was in shadow and not found occluded by case 3 is
 //!   tested against the moved surfaces' old world AABBs; only if it touches one is it traced
-//!   against the full scene.
+//!   against the full scene. (Case 3 runs first for such a ray too: tracing it against the
+//!   moved surfaces alone is cheaper, and it usually finds the shadow still there.)
 //! - **Case 5** (record on a moved object): removed; the areas are refilled on demand. The
 //!   paper finds these records as those inside the moved objects' old bounds; a record here
 //!   knows its object, so records on static surfaces inside those bounds (the floor under a
@@ -27,6 +28,9 @@
 //! arithmetic is never missed by the slab test's. Before the slab tests, a ray meets a cheaper
 //! one: from each VPL's anchor, the cone around each moved box's bounding sphere
 //! ([`SphereCone`], computed once a tick per VPL), which a ray that touches the box lies in.
+//! A record tests all its rays against the cones in one pass ([`Cones::mark`], laid out so it
+//! vectorises), and only the rays in a cone, or to a changed VPL, are looked at one by one:
+//! the refresh costs per pair what a copy costs, and per affected ray what its tests cost.
 //! Tiny contributions RGBE rounds to zero are indistinguishable from shadow; both give zero
 //! whichever way they are classified, except when a VPL's intensity changes, and then such a
 //! ray is retraced.
@@ -39,6 +43,15 @@ use crate::scene::edits::{Aabb, MovedSurface, SceneDelta};
 use crate::scene::{Scene, SceneAccel, SurfaceId};
 use crate::technique::box_tree::{widened, BoxTree, SphereCone, BOX_SLACK};
 use glam::Vec3;
+
+/// A record's point, normal and ray origin, and the VPLs' clamping distance.
+#[derive(Clone, Copy)]
+struct RecordPoint {
+    p: Vec3,
+    n: Vec3,
+    from: Vec3,
+    min_distance: f32,
+}
 
 /// How a VPL of this tick relates to last tick's VPL with the same key.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -147,10 +160,10 @@ pub struct TickChanges {
     moved_now: Option<CommittedScene>,
     new_boxes: BoxTree,
     old_boxes: BoxTree,
-    /// Per VPL of this tick, the moved surfaces' new and old bounds seen from its anchor
-    /// (`None`: the anchor lies in one's bounding sphere): a cheap pre-test before the trees.
-    new_cones: Vec<Vec<Option<SphereCone>>>,
-    old_cones: Vec<Vec<Option<SphereCone>>>,
+    /// Per VPL of this tick, the moved surfaces' new and old bounds seen from its anchor: a
+    /// cheap pre-test before the trees.
+    new_cones: Cones,
+    old_cones: Cones,
     /// `moved_objects[object]`: the object moved this tick.
     moved_objects: Vec<bool>,
 }
@@ -186,15 +199,12 @@ impl TickChanges {
         let boxes =
             |b: fn(&MovedSurface) -> &Aabb| -> Vec<Aabb> { delta.moved.iter().map(|m| widened(b(m), slack)).collect() };
         let (new_boxes, old_boxes) = (boxes(|m| &m.new_bounds), boxes(|m| &m.old_bounds));
-        let cones = |boxes: &[Aabb]| -> Vec<Vec<Option<SphereCone>>> {
-            vpls.iter().map(|v| boxes.iter().map(|b| SphereCone::new(v.anchor, b)).collect()).collect()
-        };
         Ok(Some(TickChanges {
             vpls: diff,
             old_vpls,
             moved_now,
-            new_cones: cones(&new_boxes),
-            old_cones: cones(&old_boxes),
+            new_cones: Cones::new(vpls, &new_boxes),
+            old_cones: Cones::new(vpls, &old_boxes),
             new_boxes: BoxTree::new(new_boxes),
             old_boxes: BoxTree::new(old_boxes),
             moved_objects,
@@ -211,7 +221,13 @@ impl TickChanges {
     pub fn refresh(&self, accel: &SceneAccel, vpls: &[Vpl], record: &mut Record, min_distance: f32) -> Refresh {
         let (p, n) = (record.position, record.normal);
         let from = ray_origin(p, n);
+        let at = RecordPoint { p, n, from, min_distance };
         let mut work = Refresh::default();
+        let (mut in_new, mut in_old) = (vec![false; vpls.len()], vec![false; vpls.len()]);
+        if self.moved_now.is_some() {
+            self.new_cones.mark(from, &mut in_new);
+            self.old_cones.mark(from, &mut in_old);
+        }
         let contributions: Vec<u32> = vpls
             .iter()
             .zip(&self.vpls.changes)
@@ -222,35 +238,21 @@ impl TickChanges {
                     VplChange::Invalidated => return self.retrace(accel, vpl, p, n, min_distance, &mut work),
                 };
                 let before = record.contributions.get(old).copied().unwrap_or(0);
-                if before != 0 && matches!(change, VplChange::Same(_)) {
-                    // The same VPL, seen before: its contribution stands unless a moved
-                    // surface now blocks it, and is not worked out again.
-                    if self.still_visible(accel, (k, vpl), from, true, &mut work) {
-                        return before;
+                let cones = (in_new[k], in_old[k]);
+                match (change, before != 0, cones) {
+                    // The same VPL, and no moved surface is on its ray now (if it was seen) or
+                    // was on it (if it was not): its contribution stands, without G′ or a ray.
+                    (VplChange::Same(_), true, (false, _)) | (VplChange::Same(_), false, (_, false)) => before,
+                    (VplChange::Same(_), true, _) => {
+                        if self.still_visible(accel, vpl, from, true, cones, &mut work) {
+                            before
+                        } else {
+                            work.occluded += 1;
+                            0
+                        }
                     }
-                    work.occluded += 1;
-                    return 0;
+                    _ => self.reevaluate(accel, (vpl, &self.old_vpls[old]), &at, (before, cones), &mut work),
                 }
-                let Some((e, _, _)) = irradiance_from(vpl, p, n, min_distance) else { return 0 };
-                let visible_before = before != 0;
-                if !visible_before && matches!(change, VplChange::Reweighted(_)) {
-                    // Shadow and a contribution too small for RGBE look alike; only the latter
-                    // can become visible by a change of intensity.
-                    let was_tiny = irradiance_from(&self.old_vpls[old], p, n, min_distance)
-                        .is_some_and(|(e_old, _, _)| rgbe::pack(e_old) == 0);
-                    if was_tiny {
-                        return self.retrace(accel, vpl, p, n, min_distance, &mut work);
-                    }
-                }
-                let visible = self.still_visible(accel, (k, vpl), from, visible_before, &mut work);
-                let now = if visible { rgbe::pack(e) } else { 0 };
-                work.reweighted += u64::from(now != before && visible_before && visible);
-                match (visible_before, visible) {
-                    (true, false) => work.occluded += 1,
-                    (false, true) => work.deoccluded += 1,
-                    _ => {}
-                }
-                now
             })
             .collect();
         // Unchanged contributions sum to the same bits: only a changed record is re-summed.
@@ -258,6 +260,40 @@ impl TickChanges {
             *record = Record::new(p, n, record.object, contributions, record.last_used);
         }
         work
+    }
+
+    /// A ray to a VPL that was in shadow and may no longer be, or that changed intensity: G′
+    /// and visibility are worked out again. Takes the contribution before, and whether the ray
+    /// lies in the new and the old cones.
+    fn reevaluate(
+        &self,
+        accel: &SceneAccel,
+        (vpl, old_vpl): (&Vpl, &Vpl),
+        at: &RecordPoint,
+        (before, cones): (u32, (bool, bool)),
+        work: &mut Refresh,
+    ) -> u32 {
+        let RecordPoint { p, n, from, min_distance } = *at;
+        let Some((e, _, _)) = irradiance_from(vpl, p, n, min_distance) else { return 0 };
+        let visible_before = before != 0;
+        if !visible_before && old_vpl.intensity != vpl.intensity {
+            // Shadow and a contribution too small for RGBE look alike; only the latter can
+            // become visible by a change of intensity.
+            let was_tiny =
+                irradiance_from(old_vpl, p, n, min_distance).is_some_and(|(e_old, _, _)| rgbe::pack(e_old) == 0);
+            if was_tiny {
+                return self.retrace(accel, vpl, p, n, min_distance, work);
+            }
+        }
+        let visible = self.still_visible(accel, vpl, from, visible_before, cones, work);
+        let now = if visible { rgbe::pack(e) } else { 0 };
+        work.reweighted += u64::from(now != before && visible_before && visible);
+        match (visible_before, visible) {
+            (true, false) => work.occluded += 1,
+            (false, true) => work.deoccluded += 1,
+            _ => {}
+        }
+        now
     }
 
     /// Cases 1–2: the VPL changed; trace its visibility ray against the full scene.
@@ -272,17 +308,15 @@ impl TickChanges {
     fn still_visible(
         &self,
         accel: &SceneAccel,
-        (k, vpl): (usize, &Vpl),
+        vpl: &Vpl,
         from: Vec3,
         visible_before: bool,
+        (in_new, in_old): (bool, bool),
         work: &mut Refresh,
     ) -> bool {
         let Some(moved_now) = &self.moved_now else { return visible_before };
-        // The segment from the anchor back to the record, for the cones' pre-test.
-        let reaches =
-            |cones: &[Option<SphereCone>]| cones.iter().any(|c| c.is_none_or(|c| c.may_reach(from - vpl.anchor)));
         // Case 3: a moved surface now lies on the ray.
-        if reaches(&self.new_cones[k]) {
+        if in_new {
             let ray = visibility_ray(from, vpl);
             let (near_new, tests) = self.new_boxes.hits(ray.origin, ray.dir, ray.tfar);
             work.occlusion_box_tests += tests;
@@ -297,7 +331,7 @@ impl TickChanges {
             return true;
         }
         // Case 4: the shadow may have come from a moved surface where it was.
-        if !reaches(&self.old_cones[k]) {
+        if !in_old {
             return false;
         }
         let ray = visibility_ray(from, vpl);
@@ -308,5 +342,62 @@ impl TickChanges {
         }
         work.deocclusion_rays += 1;
         !accel.scene().occluded1(&ray)
+    }
+}
+
+/// The cones ([`SphereCone`]) of some boxes seen from each VPL's anchor, one column per box
+/// with one entry per VPL, so one record's tests against every VPL run as one loop the compiler
+/// vectorises.
+struct Cones {
+    columns: Vec<ConeColumn>,
+}
+
+/// One box's cones, per VPL: the apex, the axis, cos² β (less the test's 10⁻⁵ margin) and the
+/// squared distance to the sphere; an apex inside the sphere reaches every direction.
+#[derive(Default)]
+struct ConeColumn {
+    apex: [Vec<f32>; 3],
+    axis: [Vec<f32>; 3],
+    cos2: Vec<f32>,
+    near2: Vec<f32>,
+    inside: Vec<bool>,
+}
+
+impl Cones {
+    fn new(vpls: &[Vpl], boxes: &[Aabb]) -> Cones {
+        let column = |b: &Aabb| {
+            let mut c = ConeColumn::default();
+            for v in vpls {
+                let cone = SphereCone::new(v.anchor, b);
+                let axis = cone.map_or(Vec3::ZERO, |c| c.axis);
+                for i in 0..3 {
+                    c.apex[i].push(v.anchor[i]);
+                    c.axis[i].push(axis[i]);
+                }
+                c.cos2.push(cone.map_or(0.0, |c| c.cos * c.cos * (1.0 - 1e-5)));
+                c.near2.push(cone.map_or(0.0, |c| c.near * c.near));
+                c.inside.push(cone.is_none());
+            }
+            c
+        };
+        Cones { columns: boxes.iter().map(column).collect() }
+    }
+
+    /// Sets `reach[k]` if the segment from VPL k's anchor to `to` may touch a box: the test of
+    /// [`SphereCone::may_reach`], for every VPL at once.
+    fn mark(&self, to: Vec3, reach: &mut [bool]) {
+        reach.fill(false);
+        for c in &self.columns {
+            let n = reach.len().min(c.cos2.len());
+            let (ax, ay, az) = (&c.apex[0][..n], &c.apex[1][..n], &c.apex[2][..n]);
+            let (nx, ny, nz) = (&c.axis[0][..n], &c.axis[1][..n], &c.axis[2][..n]);
+            let (cos2, near2, inside) = (&c.cos2[..n], &c.near2[..n], &c.inside[..n]);
+            for k in 0..n {
+                let d = [to.x - ax[k], to.y - ay[k], to.z - az[k]];
+                let s = d[0] * nx[k] + d[1] * ny[k] + d[2] * nz[k];
+                let length2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+                reach[k] |= inside[k] | ((s > 0.0) & (s * s >= length2 * cos2[k]) & (length2 >= near2[k]));
+            }
+        }
     }
 }
