@@ -322,7 +322,7 @@ impl InstantCache {
         let still = self.still && renumbering.is_none();
         if still {
             if let Some(kept) = pixels::all_kept(&states, &hits) {
-                self.pending.records_reused += mark_used(cache, &states, cache.records.len(), ctx.tick, true);
+                self.pending.records_reused += mark_used(cache, None, cache.records.len(), ctx.tick);
                 self.pending.samples_reused += hits.iter().filter(|h| h.is_some()).count() as u64;
                 self.samples[k] = states;
                 return kept;
@@ -338,9 +338,9 @@ impl InstantCache {
         let lookups = looked.iter().chain(&relooked).filter(|&&l| l).count() as u64 + coverage_tests;
         let looked: Vec<bool> = looked.iter().zip(&relooked).map(|(a, b)| *a || *b).collect();
         let looked_up = looked.iter().filter(|&&l| l).count() as u64;
-        let (indirect, reused) = pixels::interpolate_all(&cache.records, &mut states, &looked, still);
+        let out = pixels::interpolate_all(&cache.records, &mut states, &looked, still);
         let stats = &mut self.pending;
-        stats.records_reused += mark_used(cache, &states, first_new, ctx.tick, looked_up == 0);
+        stats.records_reused += mark_used(cache, (looked_up > 0).then_some(&out.used), first_new, ctx.tick);
         stats.records_created += new.count;
         for (rays, refresh) in works {
             stats.visibility_rays_new += rays;
@@ -348,8 +348,8 @@ impl InstantCache {
                 w.count(stats);
             }
         }
-        stats.samples_reused += reused;
-        stats.samples_interpolated += states.iter().filter(|s| s.hit.is_some()).count() as u64 - reused;
+        stats.samples_reused += out.kept;
+        stats.samples_interpolated += out.hits - out.kept;
         stats.samples_looked_up += looked_up;
         stats.cache_lookups += lookups;
         if self.config.audit {
@@ -358,7 +358,7 @@ impl InstantCache {
             stats.audit_samples_needed += audit.needed;
         }
         self.samples[k] = states;
-        indirect
+        out.indirect
     }
 
     /// With `audit`: checks every record against a fresh computation (not timed as indirect).
@@ -455,16 +455,15 @@ fn samples_bytes(samples: &[Vec<SampleState>]) -> u64 {
     samples.iter().flatten().map(|s| pixels::STATE_BYTES + s.weights.capacity() as u64 * pixels::WEIGHT_BYTES).sum()
 }
 
-/// Marks the records the samples use as used at `tick` and returns how many of those before
-/// `first_new` (kept from earlier ticks) there are. When every sample kept its list
-/// (`all_kept`), the records used are those used last tick, and no list is walked.
-fn mark_used(cache: &mut Cache, states: &[SampleState], first_new: usize, tick: u64, all_kept: bool) -> u64 {
-    let used = if all_kept {
-        cache.records.iter().map(|r| r.last_used + 1 >= tick).collect()
-    } else {
-        pixels::used(cache.records.len(), states)
+/// Marks the records the samples use (`used`, flags by index) as used at `tick` and returns
+/// how many of those before `first_new` (kept from earlier ticks) there are. `None` when every
+/// sample kept its list: the records used are then those used last tick.
+fn mark_used(cache: &mut Cache, used: Option<&[bool]>, first_new: usize, tick: u64) -> u64 {
+    let used: std::borrow::Cow<[bool]> = match used {
+        Some(used) => used.into(),
+        None => cache.records.iter().map(|r| r.last_used + 1 >= tick).collect(),
     };
-    for (r, _) in cache.records.iter_mut().zip(&used).filter(|(_, &u)| u) {
+    for (r, _) in cache.records.iter_mut().zip(used.iter()).filter(|(_, &u)| u) {
         r.last_used = tick;
     }
     used[..first_new].iter().filter(|&&u| u).count() as u64
@@ -548,7 +547,7 @@ impl Technique for InstantCache {
             self.invalidate(ctx, delta, old_vpls)?;
             // The resident records stay in use while still ticks render other generations.
             if let (TickKind::Refine | TickKind::Idle, Some(cache)) = (self.kind, self.cache.as_mut()) {
-                mark_used(cache, &[], cache.records.len(), ctx.tick, true);
+                mark_used(cache, None, cache.records.len(), ctx.tick);
             }
             self.pending.invalidate_ms = t.elapsed().as_secs_f64() * 1e3;
         }

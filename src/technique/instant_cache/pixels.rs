@@ -184,14 +184,20 @@ fn interpolate(records: &[Record], weights: &[(u32, f32)]) -> Rgb {
     }
 }
 
+/// What [`interpolate_all`] gives: each sample's indirect irradiance, how many samples have a
+/// hit and how many kept last tick's value, and the records some sample's list holds (flags by
+/// index, gathered in the same pass over the lists).
+pub struct Interpolated {
+    pub indirect: Vec<Option<Rgb>>,
+    pub hits: u64,
+    pub kept: u64,
+    pub used: Vec<bool>,
+}
+
 /// Each sample's irradiance: kept when `still` (no record's irradiance changed) and the sample
-/// did not look up (`looked`), else interpolated. Returns them and how many were kept.
-pub fn interpolate_all(
-    records: &[Record],
-    states: &mut [SampleState],
-    looked: &[bool],
-    still: bool,
-) -> (Vec<Option<Rgb>>, u64) {
+/// did not look up (`looked`), else interpolated.
+pub fn interpolate_all(records: &[Record], states: &mut [SampleState], looked: &[bool], still: bool) -> Interpolated {
+    let flags = AtomicFlags::new(records.len());
     let out: Vec<(Option<Rgb>, bool)> = states
         .par_iter_mut()
         .zip(looked)
@@ -199,6 +205,7 @@ pub fn interpolate_all(
             if state.hit.is_none() {
                 return (None, false);
             }
+            state.weights.iter().for_each(|&(i, _)| flags.set(i));
             let keep = still && !looked && state.indirect.is_some();
             if !keep {
                 state.indirect = Some(interpolate(records, &state.weights));
@@ -206,8 +213,8 @@ pub fn interpolate_all(
             (state.indirect, keep)
         })
         .collect();
-    let kept = out.iter().filter(|o| o.1).count() as u64;
-    (out.into_iter().map(|o| o.0).collect(), kept)
+    let (hits, kept) = out.iter().fold((0, 0), |(h, k), o| (h + u64::from(o.0.is_some()), k + u64::from(o.1)));
+    Interpolated { indirect: out.into_iter().map(|o| o.0).collect(), hits, kept, used: flags.into_vec() }
 }
 
 /// The records some sample's list holds, as flags by index.
@@ -265,9 +272,14 @@ impl AtomicFlags {
         AtomicFlags((0..len).map(|_| AtomicBool::new(false)).collect())
     }
 
+    /// Sets flag `i`. Most flags are set many times over (one record serves many samples):
+    /// reading first leaves a set flag's cache line shared between the threads instead of
+    /// bouncing it between them on every store.
     fn set(&self, i: u32) {
         if let Some(flag) = self.0.get(i as usize) {
-            flag.store(true, Ordering::Relaxed);
+            if !flag.load(Ordering::Relaxed) {
+                flag.store(true, Ordering::Relaxed);
+            }
         }
     }
 
