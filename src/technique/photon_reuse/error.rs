@@ -82,92 +82,162 @@ pub fn check_path(
 ) -> Checked {
     let photons = store.word[path].photons();
     let escape = store.escape[path].get();
-    let segments = photons + u32::from(escape != Vec3::ZERO);
+    let check = PathCheck {
+        scene,
+        accel,
+        store,
+        path,
+        changes,
+        threshold,
+        photons,
+        escape,
+        segments: photons + u32::from(escape != Vec3::ZERO),
+    };
     let mut out = Checked { outcome: Outcome::Valid, moved: Vec::new(), rays: 0, tests: 0 };
-    let material_of = |object: u32| &scene.materials[scene.objects[object as usize].material as usize];
-    // The material the stored energies at an object were computed with.
-    let stored_material_of =
-        |object: u32| changes.previous_material[object as usize].as_ref().unwrap_or(material_of(object));
-    // The segment's start: the light's origin, or vertex k−1 with its object; `updated` holds
-    // vertex k−1 when this tick moved it (otherwise the store has it).
-    let mut start = path_origin(scene, store, path);
-    let mut start_object: Option<u32> = None;
-    let mut updated: Option<Photon> = None;
-    for k in 0..segments {
+    let mut at = Cursor { start: path_origin(scene, store, path), start_object: None, updated: None };
+    for k in 0..check.segments {
         // Only the end's position and object are read until a ray is needed.
         let stored_end = (k < photons).then(|| {
             (store.rows[k as usize].position[path], store.surfaces.object(store.rows[k as usize].surface[path]))
         });
         let (dir, t_max) = match stored_end {
-            Some((position, _)) => (position - start, 1.0),
+            Some((position, _)) => (position - at.start, 1.0),
             None => (escape, f32::INFINITY),
         };
-        // The stored direction leaving photon k, if the path goes on from it.
-        let next_out = |at: Vec3| {
-            (k + 1 < segments).then(|| match k + 1 < photons {
-                true => (store.rows[k as usize + 1].position[path] - at).normalize_or_zero(),
-                false => escape,
-            })
-        };
-        let crossing = changes.crosses(mask, k, start, dir, t_max);
-        let crossed = crossing.crossed;
+        let crossing = changes.crosses(mask, k, at.start, dir, t_max);
         out.tests += crossing.tests;
         out.rays += crossing.rays;
         let end_moved = stored_end.is_some_and(|(_, o)| changes.moved[o as usize]);
-        let start_on_moved = start_object.is_some_and(|o| changes.moved[o as usize]);
-        if !crossed && !end_moved && updated.is_none() && !start_on_moved {
+        let start_on_moved = at.start_object.is_some_and(|o| changes.moved[o as usize]);
+        if !crossing.crossed && !end_moved && at.updated.is_none() && !start_on_moved {
             let Some((end_position, end_object)) = stored_end else { break };
-            // A new material at a photon where roulette ended the path changes the roulette.
-            if changes.previous_material[end_object as usize].is_some()
-                && k + 1 == segments
-                && k + 1 < store.max_photons as u32
-            {
-                out.outcome = Outcome::Retrace(Retrace::FreshFrom(k + 1));
+            if let Some(outcome) = check.untraced_end(k, end_position, end_object) {
+                out.outcome = outcome;
                 return out;
             }
-            // Only the material at the end may have changed: its exact factor decides.
-            if let (Some(old), Some(wo)) = (&changes.previous_material[end_object as usize], next_out(end_position)) {
-                let e = photon_at(store, path, k as usize);
-                let current = material_of(e.object);
-                let same = !old.is_specular()
-                    && !current.is_specular()
-                    && within(reflected(scene, current, &e, wo), reflected(scene, old, &e, wo), threshold);
-                if !same {
-                    out.outcome = Outcome::Retrace(Retrace::FreshFrom(k + 1));
-                    return out;
-                }
-            }
-            start = end_position;
-            start_object = Some(end_object);
+            at = Cursor { start: end_position, start_object: Some(end_object), updated: None };
             continue;
         }
-        // A visibility ray along the segment (Algorithm 1, line 5).
+        let Some(next) = check.traced_segment(k, &at, stored_end.is_some(), dir, &mut out) else { return out };
+        at = next;
+    }
+    out
+}
+
+/// What every step of one path's check reads.
+struct PathCheck<'a> {
+    scene: &'a Scene,
+    accel: &'a SceneAccel,
+    store: &'a PathStore,
+    path: usize,
+    changes: &'a Changes,
+    threshold: f32,
+    photons: u32,
+    escape: Vec3,
+    segments: u32,
+}
+
+/// Where the walk along a path stands before a segment: its start (the light's origin, or
+/// vertex k−1) with its object, and vertex k−1 if this tick moved it (otherwise the store has
+/// it).
+struct Cursor {
+    start: Vec3,
+    start_object: Option<u32>,
+    updated: Option<Photon>,
+}
+
+/// A segment's ray found its end on an object: the stored end, the photon there now, the
+/// segment's unit direction, and whether the new end is the stored place (and, further, the
+/// stored triangle in the orientation it was sampled with).
+struct Found {
+    end: Photon,
+    new: Photon,
+    dir_n: Vec3,
+    same_place: bool,
+    oriented: bool,
+}
+
+impl PathCheck<'_> {
+    fn material_of(&self, object: u32) -> &Material {
+        &self.scene.materials[self.scene.objects[object as usize].material as usize]
+    }
+
+    /// The material the stored energies at an object were computed with.
+    fn stored_material_of(&self, object: u32) -> &Material {
+        self.changes.previous_material[object as usize].as_ref().unwrap_or(self.material_of(object))
+    }
+
+    /// The stored direction leaving photon k (at `at`), if the path goes on from it.
+    fn next_out(&self, k: u32, at: Vec3) -> Option<Vec3> {
+        (k + 1 < self.segments).then(|| match k + 1 < self.photons {
+            true => (self.store.rows[k as usize + 1].position[self.path] - at).normalize_or_zero(),
+            false => self.escape,
+        })
+    }
+
+    /// Roulette ended the path at photon k (it has no next segment, and could have had one).
+    fn ended_by_roulette(&self, k: u32) -> bool {
+        k + 1 == self.segments && k + 1 < self.store.max_photons as u32
+    }
+
+    /// Rule 1 held for segment k, so its end stands; only the material there may have changed,
+    /// and then its exact factor decides. Returns the outcome if the path stops being valid.
+    fn untraced_end(&self, k: u32, end_position: Vec3, end_object: u32) -> Option<Outcome> {
+        let old = self.changes.previous_material[end_object as usize].as_ref()?;
+        // A new material at a photon where roulette ended the path changes the roulette.
+        if self.ended_by_roulette(k) {
+            return Some(Outcome::Retrace(Retrace::FreshFrom(k + 1)));
+        }
+        let wo = self.next_out(k, end_position)?;
+        let e = photon_at(self.store, self.path, k as usize);
+        let current = self.material_of(e.object);
+        let same = !old.is_specular()
+            && !current.is_specular()
+            && within(reflected(self.scene, current, &e, wo), reflected(self.scene, old, &e, wo), self.threshold);
+        (!same).then_some(Outcome::Retrace(Retrace::FreshFrom(k + 1)))
+    }
+
+    /// Rule 2 for segment k: a visibility ray along it (Algorithm 1, line 5), then rules 3–4 at
+    /// the end it finds. Returns where the next segment starts, or `None` once `out.outcome`
+    /// is decided.
+    fn traced_segment(&self, k: u32, at: &Cursor, has_end: bool, dir: Vec3, out: &mut Checked) -> Option<Cursor> {
+        let found = self.trace(k, at, has_end, dir, out)?;
+        self.judge(k, found, out)
+    }
+
+    /// Traces segment k's ray and finds the photon at its end now; `None` with `out.outcome`
+    /// set when the path now ends or (the escape segment) stays valid or is blocked.
+    fn trace(&self, k: u32, at: &Cursor, has_end: bool, dir: Vec3, out: &mut Checked) -> Option<Found> {
+        let (scene, accel) = (self.scene, self.accel);
         let dir_n = dir.normalize_or_zero();
-        let ray_origin = match start_object {
-            None => start,
-            Some(_) => leaving(scene, &updated.unwrap_or_else(|| photon_at(store, path, k as usize - 1)), dir_n),
+        let ray_origin = match at.start_object {
+            None => at.start,
+            Some(_) => {
+                leaving(scene, &at.updated.unwrap_or_else(|| photon_at(self.store, self.path, k as usize - 1)), dir_n)
+            }
         };
         out.rays += 1;
         let hit = accel.scene().intersect1(&Ray::new(ray_origin, dir_n));
-        let Some(_) = stored_end else {
+        if !has_end {
             // The escape segment: valid while it still meets no object (nothing, or a light).
             if hit.and_then(|h| accel.resolve(&h)).is_some_and(|(surface, _)| matches!(surface, SurfaceId::Object(_))) {
                 out.outcome = Outcome::Retrace(Retrace::KeepSegment(k));
             }
-            return out;
-        };
-        let end = photon_at(store, path, k as usize);
+            return None;
+        }
+        let end = photon_at(self.store, self.path, k as usize);
         let resolved = hit.and_then(|h| accel.resolve(&h).map(|r| (h, r)));
         let Some((h, (SurfaceId::Object(object), prim))) = resolved else {
             // The segment now leaves the scene or ends on a light: the path ends here.
             out.outcome = Outcome::End { photons: k, escape: dir_n };
-            return out;
+            return None;
         };
         let sp = scene.surface_point(SurfaceId::Object(object), prim, h.u, h.v);
         let same_place = object == end.object && (sp.p - end.position).length() <= SAME_PLACE * dir.length();
         // On a turned object the same place can lie on another triangle (or on its own, turned):
         // the photon takes the triangle hit now, and stays the stored one only if that is the
         // same triangle with the orientation it was sampled with.
+        let changes = self.changes;
         let oriented =
             same_place && prim == end.prim && (!changes.moved[object as usize] || changes.translated[object as usize]);
         let new = if same_place {
@@ -175,52 +245,62 @@ pub fn check_path(
         } else {
             Photon { position: sp.p, incoming: dir_n, object, prim, power: end.power }
         };
+        Some(Found { end, new, dir_n, same_place, oriented })
+    }
+
+    /// Rules 3–4 at segment k's new end: keep the stored energies (and go on) or decide how the
+    /// path is retraced.
+    fn judge(&self, k: u32, found: Found, out: &mut Checked) -> Option<Cursor> {
+        let Found { end, new, dir_n, same_place, oriented } = found;
+        let mut retrace = |from: Retrace| {
+            out.moved.push((k, new));
+            out.outcome = Outcome::Retrace(from);
+            None
+        };
         // A path that Russian roulette ended at the old end must draw its roulette again where
         // it ends now, unless the roulette there is the same draw (see `keeps_verdict`):
         // keeping the old verdict would end it with probability (1−q_old) and continue it only
         // with q_old·q_new, losing energy.
-        let ended_by_roulette = k + 1 == segments && k + 1 < store.max_photons as u32;
-        let same_material = stored_material_of(end.object) == material_of(new.object);
-        let keeps = keeps_verdict(scene, changes, &end, &new, same_place, same_material);
-        if ended_by_roulette && !keeps {
-            out.moved.push((k, new));
-            out.outcome = Outcome::Retrace(Retrace::FreshFrom(k + 1));
-            return out;
+        let same_material = self.stored_material_of(end.object) == self.material_of(new.object);
+        let keeps = keeps_verdict(self.scene, self.changes, &end, &new, same_place, same_material);
+        if self.ended_by_roulette(k) && !keeps {
+            return retrace(Retrace::FreshFrom(k + 1));
         }
         // A vertex that is new (moved away from where it was, other than by translating with
         // its object and material) goes on from a fresh sample whatever lay beyond it: keeping
         // the continuations that pass the energy check would keep every escaping one (same
         // direction, exact energy) and few that hit geometry, a selection by outcome.
-        if !(same_place || keeps) && next_out(end.position).is_some() {
-            out.moved.push((k, new));
-            out.outcome = Outcome::Retrace(Retrace::FreshFrom(k + 1));
-            return out;
+        if !(same_place || keeps) && self.next_out(k, end.position).is_some() {
+            return retrace(Retrace::FreshFrom(k + 1));
         }
         // Compare the energy reflected at the new end with the stored (lines 11–12).
-        if let (Some(old_out), Some(new_out)) = (next_out(end.position), next_out(new.position)) {
-            let (old_m, new_m) = (stored_material_of(end.object), material_of(new.object));
-            let unchanged = oriented && (dir_n - end.incoming).length() <= SAME_PLACE && old_m == new_m;
+        let unchanged_ray = oriented && (dir_n - end.incoming).length() <= SAME_PLACE;
+        if let (Some(old_out), Some(new_out)) = (self.next_out(k, end.position), self.next_out(k, new.position)) {
+            let (old_m, new_m) = (self.stored_material_of(end.object), self.material_of(new.object));
             let close = if old_m.is_specular() || new_m.is_specular() {
-                unchanged
+                unchanged_ray && old_m == new_m
             } else {
-                within(reflected(scene, new_m, &new, new_out), reflected(scene, old_m, &end, old_out), threshold)
+                within(
+                    reflected(self.scene, new_m, &new, new_out),
+                    reflected(self.scene, old_m, &end, old_out),
+                    self.threshold,
+                )
             };
             if !close {
-                out.moved.push((k, new));
-                out.outcome = Outcome::Retrace(continuation(same_place && same_material, keeps, k + 1));
-                return out;
+                return retrace(continuation(same_place && same_material, keeps, k + 1));
             }
         }
         // Store the new end unless it is the stored one (then the stored photon stays exact).
-        let stored = if oriented && (dir_n - end.incoming).length() <= SAME_PLACE { end } else { new };
+        let stored = if unchanged_ray { end } else { new };
         if stored != end {
             out.moved.push((k, stored));
         }
-        start = stored.position;
-        start_object = Some(stored.object);
-        updated = (stored != end).then_some(stored);
+        Some(Cursor {
+            start: stored.position,
+            start_object: Some(stored.object),
+            updated: (stored != end).then_some(stored),
+        })
     }
-    out
 }
 
 /// Whether vertex k's roulette verdict and sampled direction still hold at its new place
