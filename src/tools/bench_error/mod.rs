@@ -15,11 +15,14 @@ mod reference;
 mod report;
 
 use super::{progress_bar, SceneArgs, UsageError};
-use crate::engine::{thread_pool, Session};
+use crate::embree::Device;
+use crate::engine::{thread_pool, Frame, Session};
 use crate::film::{DenoiseQuality, DenoiseSettings};
 use crate::scene::animation::Animation;
+use crate::scene::Scene;
 use crate::technique::TechniqueConfig;
 use anyhow::{Context, Result};
+use indicatif::ProgressBar;
 use metrics::ImageError;
 use reference::{Reference, ReferenceKey};
 use serde::Serialize;
@@ -185,108 +188,28 @@ pub fn run(args: ErrorArgs) -> Result<()> {
         return Err(UsageError("--fps must be a positive number".into()).into());
     }
     let configs = bench_configs(&args.techniques, args.denoise.as_deref())?;
-    let scene = args.target.load_scene()?;
-    let scene_file = std::fs::read(&args.target.scene)?;
-    let (animation, animation_file) = match &args.anim {
-        Some(p) => {
-            let a = Animation::load(p).map_err(|e| UsageError(format!("{}: {e}", p.display())))?;
-            a.validate(&scene).map_err(|e| UsageError(format!("{}: {e}", p.display())))?;
-            (Some(a), Some(std::fs::read(p)?))
-        }
-        None => (None, None),
-    };
+    let inputs = Inputs::load(&args)?;
     let threads = args.target.threads();
     let pool = thread_pool(threads)?;
     let device = args.target.device()?;
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
-
-    // References for every measured frame (one when the scene is static).
-    let measured: Vec<u32> = (0..args.frames).step_by(args.every as usize).collect();
-    let time_of = |frame: u32| if animation.is_some() { frame as f32 / args.fps } else { 0.0 };
-    let mut times: Vec<f32> = measured.iter().map(|&f| time_of(f)).collect();
-    times.dedup();
-    let refs_bar = progress_bar(times.len() as u64 * (args.ref_spp / 2).max(1) as u64 * 2, "spp")?;
-    refs_bar.set_message(format!("references ({})", args.reference));
-    let mut references: Vec<(f32, Reference)> = Vec::new();
-    pool.install(|| -> Result<()> {
-        for &time in &times {
-            let key = ReferenceKey {
-                scene_file: &scene_file,
-                animation_file: animation_file.as_deref(),
-                time,
-                width: scene.camera.width,
-                height: scene.camera.height,
-                spp: args.ref_spp,
-                seed: args.seed,
-                technique: &args.reference,
-            };
-            let (r, _) = reference::reference(&args.cache, &key, &scene, animation.as_ref(), &device, &refs_bar)?;
-            references.push((time, r));
-        }
-        Ok(())
-    })?;
-    refs_bar.finish_and_clear();
-    let reference_at = |time: f32| references.iter().find(|(t, _)| *t == time).map(|(_, r)| r);
+    let references = pool.install(|| references(&args, &inputs, &device))?;
+    let bench = Bench { args: &args, inputs: &inputs, pool: &pool, device: &device, references: &references };
 
     // Every configuration, repeated; errors from the first run (the seed makes them the same).
     let run_bar = progress_bar(configs.len() as u64 * args.repeats as u64 * args.frames as u64, "frames")?;
     let mut frames: Vec<FrameResult> = Vec::new();
-    let mut error_maps: BTreeMap<String, (u32, f64, Vec<u8>)> = BTreeMap::new();
+    let mut error_maps: ErrorMaps = BTreeMap::new();
     for config in &configs {
-        let label = config.label();
-        run_bar.set_message(label.clone());
-        let mut runs: Vec<Vec<FrameResult>> = Vec::new();
-        for repeat in 0..args.repeats {
-            let mut session = Session::new(scene.clone(), &config.technique, args.seed, &device)?;
-            if let Some(settings) = config.denoise {
-                session.enable_denoise(settings)?;
-            }
-            let mut run = Vec::new();
-            pool.install(|| -> Result<()> {
-                for frame in 0..args.frames {
-                    let time = time_of(frame);
-                    if let Some(a) = &animation {
-                        session.queue_edits(a.edits_at(time))?;
-                    }
-                    let f = session.tick()?;
-                    let t = &f.stats.times;
-                    let error = match (repeat, frame % args.every == 0, reference_at(time)) {
-                        (0, true, Some(r)) => {
-                            let (e, map) = metrics::compare(f.shown(false), &r.image);
-                            let worst = error_maps.get(&label).map_or(-1.0, |w| w.1);
-                            if e.flip_hdr > worst {
-                                error_maps.insert(label.clone(), (frame, e.flip_hdr, metrics::false_colour(&map)));
-                            }
-                            Some(e)
-                        }
-                        _ => None,
-                    };
-                    run.push(FrameResult {
-                        config: label.clone(),
-                        frame,
-                        time_s: time,
-                        tick_ms: t.total_ms,
-                        stages_ms: BTreeMap::from([
-                            ("apply_commit", t.drain_ms + t.apply_ms + t.commit_ms),
-                            ("update", t.update_ms),
-                            ("render", t.render_ms),
-                            ("resolve", t.resolve_ms),
-                            ("denoise", t.denoise_ms),
-                        ]),
-                        rays: f.stats.rays.total() + f.stats.aux_rays,
-                        memory_bytes: f.stats.detail.memory().total_bytes,
-                        error,
-                    });
-                    run_bar.inc(1);
-                }
-                Ok(())
-            })?;
-            runs.push(run);
-        }
+        run_bar.set_message(config.label());
+        let runs = (0..args.repeats)
+            .map(|repeat| bench.run_config(config, repeat, &run_bar, &mut error_maps))
+            .collect::<Result<Vec<_>>>()?;
         frames.extend(report::merge_repeats(runs));
     }
     run_bar.finish_and_clear();
 
+    let scene = &inputs.scene;
     let reference_rel_mse = references.iter().map(|(_, r)| r.self_rel_mse).fold(0.0, f64::max);
     let labels: Vec<String> = configs.iter().map(BenchConfig::label).collect();
     let summaries = report::summarise(&labels, &frames);
@@ -308,6 +231,145 @@ pub fn run(args: ErrorArgs) -> Result<()> {
     report::print_table(&report);
     println!("wrote {}", args.out.display());
     Ok(())
+}
+
+/// Per configuration, its worst frame's error map: (frame, HDR-FLIP, false-colour pixels).
+type ErrorMaps = BTreeMap<String, (u32, f64, Vec<u8>)>;
+
+/// The scene and animation, with the files' bytes that key their references.
+struct Inputs {
+    scene: Scene,
+    scene_file: Vec<u8>,
+    animation: Option<Animation>,
+    animation_file: Option<Vec<u8>>,
+}
+
+impl Inputs {
+    fn load(args: &ErrorArgs) -> Result<Inputs> {
+        let scene = args.target.load_scene()?;
+        let scene_file = std::fs::read(&args.target.scene)?;
+        let (animation, animation_file) = match &args.anim {
+            Some(p) => {
+                let a = Animation::load(p).map_err(|e| UsageError(format!("{}: {e}", p.display())))?;
+                a.validate(&scene).map_err(|e| UsageError(format!("{}: {e}", p.display())))?;
+                (Some(a), Some(std::fs::read(p)?))
+            }
+            None => (None, None),
+        };
+        Ok(Inputs { scene, scene_file, animation, animation_file })
+    }
+
+    /// The animation time of `frame` (0 for a static scene).
+    fn time_of(&self, args: &ErrorArgs, frame: u32) -> f32 {
+        if self.animation.is_some() {
+            frame as f32 / args.fps
+        } else {
+            0.0
+        }
+    }
+}
+
+/// References for every measured frame's time (one when the scene is static), from the cache
+/// or rendered.
+fn references(args: &ErrorArgs, inputs: &Inputs, device: &Device) -> Result<Vec<(f32, Reference)>> {
+    let mut times: Vec<f32> = (0..args.frames).step_by(args.every as usize).map(|f| inputs.time_of(args, f)).collect();
+    times.dedup();
+    let bar = progress_bar(times.len() as u64 * (args.ref_spp / 2).max(1) as u64 * 2, "spp")?;
+    bar.set_message(format!("references ({})", args.reference));
+    let scene = &inputs.scene;
+    let references = times
+        .iter()
+        .map(|&time| {
+            let key = ReferenceKey {
+                scene_file: &inputs.scene_file,
+                animation_file: inputs.animation_file.as_deref(),
+                time,
+                width: scene.camera.width,
+                height: scene.camera.height,
+                spp: args.ref_spp,
+                seed: args.seed,
+                technique: &args.reference,
+            };
+            let (r, _) = reference::reference(&args.cache, &key, scene, inputs.animation.as_ref(), device, &bar)?;
+            Ok((time, r))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    bar.finish_and_clear();
+    Ok(references)
+}
+
+/// What every configuration's runs share.
+struct Bench<'a> {
+    args: &'a ErrorArgs,
+    inputs: &'a Inputs,
+    pool: &'a rayon::ThreadPool,
+    device: &'a Device,
+    references: &'a [(f32, Reference)],
+}
+
+impl Bench<'_> {
+    /// One run of `config` over every frame; the first (`repeat` 0) also measures the errors
+    /// and keeps the worst frame's error map.
+    fn run_config(
+        &self,
+        config: &BenchConfig,
+        repeat: u32,
+        bar: &ProgressBar,
+        error_maps: &mut ErrorMaps,
+    ) -> Result<Vec<FrameResult>> {
+        let (args, inputs) = (self.args, self.inputs);
+        let label = config.label();
+        let mut session = Session::new(inputs.scene.clone(), &config.technique, args.seed, self.device)?;
+        if let Some(settings) = config.denoise {
+            session.enable_denoise(settings)?;
+        }
+        self.pool.install(|| {
+            (0..args.frames)
+                .map(|frame| {
+                    let time = inputs.time_of(args, frame);
+                    if let Some(a) = &inputs.animation {
+                        session.queue_edits(a.edits_at(time))?;
+                    }
+                    let f = session.tick()?;
+                    let reference = self.references.iter().find(|(t, _)| *t == time).map(|(_, r)| r);
+                    let error = match (repeat, frame % args.every == 0, reference) {
+                        (0, true, Some(r)) => {
+                            let (e, map) = metrics::compare(f.shown(false), &r.image);
+                            let worst = error_maps.get(&label).map_or(-1.0, |w| w.1);
+                            if e.flip_hdr > worst {
+                                error_maps.insert(label.clone(), (frame, e.flip_hdr, metrics::false_colour(&map)));
+                            }
+                            Some(e)
+                        }
+                        _ => None,
+                    };
+                    bar.inc(1);
+                    Ok(frame_result(&label, frame, time, &f, error))
+                })
+                .collect()
+        })
+    }
+}
+
+/// One frame's measurements.
+fn frame_result(label: &str, frame: u32, time: f32, f: &Frame, error: Option<ImageError>) -> FrameResult {
+    let t = &f.stats.times;
+    FrameResult {
+        config: label.to_string(),
+        frame,
+        time_s: time,
+        tick_ms: t.total_ms,
+        stages_ms: BTreeMap::from([
+            ("apply_commit", t.drain_ms + t.apply_ms + t.commit_ms),
+            ("update", t.update_ms),
+            ("render", t.render_ms),
+            ("resolve", t.resolve_ms),
+            ("denoise", t.denoise_ms),
+        ]),
+        rays: f.stats.rays.total() + f.stats.aux_rays,
+        memory_bytes: f.stats.detail.memory().total_bytes,
+        error,
+    }
 }
 
 #[cfg(test)]
