@@ -25,10 +25,10 @@
 //!    is kept per light (up to 8 shares): an intensity or colour edit scales its light's share
 //!    (no rays), a light move redoes that share only, a material edit re-scatters the kept
 //!    direct flux without emission rays, and a tick without such edits does no lighting work.
-//! 3. Ray-tracing stage (§4.3, every tick): camera samples through mirrors and glass to their
-//!    diffuse hits (the preliminary trace, which marks the radiance particles needed); lists
-//!    are built for needed radiance particles that have none; gathering through the 16 × 16
-//!    links for the area particles in those lists and radiance estimation (`gather.rs`), only
+//! 3. Ray-tracing stage (§4.3, every tick; `samples.rs`): camera samples through mirrors and
+//!    glass to their diffuse hits (the preliminary trace, which marks the radiance particles
+//!    needed); lists are built for needed radiance particles that have none; gathering through
+//!    the 16 × 16 links for the area particles in those lists and radiance estimation (`gather.rs`), only
 //!    for radiance particles without a cached estimate (the cache holds while the field and
 //!    the lists do, scales with an intensity edit, and after any other lighting change the
 //!    estimates cached since the camera last moved are gathered again in place); final
@@ -71,14 +71,14 @@ mod lighting;
 mod links;
 mod particles;
 mod radiance;
+mod samples;
 mod strata;
 
 pub use config::{ParticleGiConfig, ParticleStats, MAX_PARTICLES};
 
-use super::camera_chain::{self, CameraSample};
 use super::path::max_path_length;
 use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
-use crate::core::{Rgb, Rng};
+use crate::core::Rgb;
 use crate::film::Film;
 use crate::scene::edits::{Aabb, SceneDelta};
 use crate::scene::{Scene, SurfaceId};
@@ -90,8 +90,6 @@ use lighting::{Inputs, Lighting, LightingWork};
 use links::{LinkSet, Moves, Target};
 use particles::{AreaParticles, Layout};
 use radiance::{EstimationLists, RadianceKey, Tessellation};
-use rayon::prelude::*;
-use std::f32::consts::FRAC_1_PI;
 use std::time::Instant;
 
 /// Particle grid cells, in particle spacings: about eight points a cell, so most nearest-
@@ -118,32 +116,6 @@ struct Geometry {
     scales: Vec<Vec3>,
 }
 
-/// Pending samples per parallel chunk when gathering missing estimates.
-const PENDING_CHUNK: usize = 1024;
-/// Keys a chunk remembers to drop repeats (a small ring: neighbours share corners).
-const RECENT_KEYS: usize = 16;
-
-/// A subtriangle's three radiance particles with a point's barycentric weights.
-type Corners = [(RadianceKey, radiance::Vertex, f32); 3];
-
-/// The radiance particles around a camera sample's diffuse hit, on the side it sees.
-fn sample_corners(tessellation: &Tessellation, s: &Shaded) -> Option<Corners> {
-    let hit = s.sample.hit.as_ref()?;
-    let side = u8::from(hit.n.dot(hit.wo) < 0.0);
-    tessellation.corners(hit.object, hit.triangle, hit.uv, side)
-}
-
-/// The irradiance at a point of a subtriangle: its corners' cached estimates weighted by
-/// their barycentric weights; `None` while a corner has no estimate.
-fn interpolate(estimates: &Estimates, corners: &Corners) -> Option<Rgb> {
-    let mut sum = Rgb::BLACK;
-    for (k, _, w) in corners {
-        sum += estimates.get(*k)? * *w;
-    }
-    let weights: f32 = corners.iter().map(|x| x.2).sum();
-    Some(if weights > 0.0 { sum / weights } else { Rgb::BLACK })
-}
-
 /// The `particle_gi` technique.
 pub struct ParticleGi {
     config: ParticleGiConfig,
@@ -155,23 +127,6 @@ pub struct ParticleGi {
     estimates: Estimates,
     passes: u64,
     pending: ParticleStats,
-}
-
-/// One shaded camera sample.
-struct Sampled {
-    pixel: usize,
-    radiance: Rgb,
-    /// `radiance` without the sampled direct light.
-    steady: Rgb,
-    object: Option<u32>,
-}
-
-/// One camera sample with its direct light.
-struct Shaded {
-    pixel: usize,
-    sample: CameraSample,
-    direct: Rgb,
-    shadow: bool,
 }
 
 impl ParticleGi {
@@ -366,166 +321,6 @@ impl ParticleGi {
         self.pending.scatter_deposits += work.deposits;
         self.pending.emission_ms += work.emission_ms;
         self.pending.scattering_ms += work.scattering_ms;
-    }
-
-    /// Camera samples `(pixel, sample)` with their direct light (the preliminary trace).
-    fn trace(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<Shaded> {
-        let t = Instant::now();
-        let scene = ctx.scene;
-        let shaded: Vec<Shaded> = samples
-            .par_iter()
-            .map(|&(pixel, sample)| {
-                let mut rng = Rng::for_sample(ctx.seed, ctx.tick, pixel as u64, sample);
-                let jitter = rng.next_2d();
-                let s = camera_chain::trace(scene, ctx.accel, pixel, jitter, &mut rng);
-                let (direct, shadow) = match &s.hit {
-                    Some(hit) => camera_chain::direct_light(scene, ctx.accel, hit, &mut rng),
-                    None => (Rgb::BLACK, false),
-                };
-                Shaded { pixel, sample: s, direct, shadow }
-            })
-            .collect();
-        self.pending.camera_rays += samples.len() as u64;
-        self.pending.specular_rays += shaded.iter().map(|s| s.sample.specular_rays).sum::<u64>();
-        self.pending.shadow_rays += shaded.iter().filter(|s| s.shadow).count() as u64;
-        self.pending.trace_ms += t.elapsed().as_secs_f64() * 1e3;
-        shaded
-    }
-
-    /// Indirect irradiance at each shaded sample, interpolated over its hit's subtriangle from
-    /// the cached estimates; radiance particles without one get their lists, gathering and
-    /// estimation first.
-    fn indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded]) -> Vec<Rgb> {
-        let (Some(g), true) = (self.geometry.as_ref(), self.lighting.is_some()) else {
-            return vec![Rgb::BLACK; shaded.len()];
-        };
-        let t = Instant::now();
-        let corners = |s: &Shaded| sample_corners(&g.tessellation, s);
-        let estimates = &self.estimates;
-        let mut indirect: Vec<Option<Rgb>> =
-            shaded.par_iter().map(|s| corners(s).map_or(Some(Rgb::BLACK), |c| interpolate(estimates, &c))).collect();
-        let pending: Vec<usize> = (0..shaded.len()).filter(|&i| indirect[i].is_none()).collect();
-        if pending.is_empty() {
-            self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
-            return indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect();
-        }
-        // After a light move every sample is pending: their corners are gathered in parallel,
-        // chunk by chunk, dropping a key just seen (neighbouring samples share corners), and
-        // the chunks' few keys are deduplicated in sample order.
-        let chunks: Vec<Vec<(RadianceKey, radiance::Vertex)>> = pending
-            .par_chunks(PENDING_CHUNK)
-            .map(|chunk| {
-                let mut recent = [RadianceKey::MAX; RECENT_KEYS];
-                let mut out = Vec::new();
-                for (k, v, _) in chunk.iter().filter_map(|&i| corners(&shaded[i])).flatten() {
-                    if !recent.contains(&k) && estimates.get(k).is_none() {
-                        recent[out.len() % RECENT_KEYS] = k;
-                        out.push((k, v));
-                    }
-                }
-                out
-            })
-            .collect();
-        let missing = estimates.missing(chunks.into_iter().flatten());
-        self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
-        self.estimate_missing(ctx, &missing);
-        let t = Instant::now();
-        let Some(g) = self.geometry.as_ref() else { return vec![Rgb::BLACK; shaded.len()] };
-        let estimates = &self.estimates;
-        let filled: Vec<Option<Rgb>> = pending
-            .par_iter()
-            .map(|&i| sample_corners(&g.tessellation, &shaded[i]).and_then(|c| interpolate(estimates, &c)))
-            .collect();
-        for (&i, value) in pending.iter().zip(filled) {
-            indirect[i] = value;
-        }
-        self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
-        indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect()
-    }
-
-    /// Lists, gathering and estimation for the radiance particles `missing`, whose estimates
-    /// are then cached.
-    fn estimate_missing(&mut self, ctx: &RenderContext, missing: &[(RadianceKey, radiance::Vertex)]) {
-        let (Some(g), true) = (self.geometry.as_mut(), self.lighting.is_some()) else { return };
-        let t = Instant::now();
-        let (radius, cosine) = (self.config.estimation_radius * g.spacing, self.config.estimation_cosine);
-        let built: Vec<(RadianceKey, radiance::EstimationList)> = missing
-            .par_iter()
-            .filter(|(k, _)| !g.lists.contains(*k))
-            .map(|(k, v)| (*k, EstimationLists::build(ctx.scene, &g.particles, &g.grids, v, radius, cosine)))
-            .collect();
-        self.pending.lists_built += built.len() as u64;
-        built.into_iter().for_each(|(k, l)| g.lists.insert(k, l));
-        self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
-        let keys: Vec<RadianceKey> = missing.iter().map(|(k, _)| *k).collect();
-        self.gather_and_store(ctx, &keys);
-    }
-
-    /// Gathering (with the lazy links it needs) and estimation for the radiance particles
-    /// `keys`, whose lists exist; their estimates are then cached.
-    fn gather_and_store(&mut self, ctx: &RenderContext, keys: &[RadianceKey]) {
-        let (Some(g), Some(lighting)) = (self.geometry.as_mut(), self.lighting.as_ref()) else { return };
-        let t = Instant::now();
-        let wanted = gather::particles_to_gather(&g.lists, keys, g.particles.len());
-        let lazily = g.gather.ensure(Target::new(ctx, &g.particles, &g.grids), wanted.iter().copied());
-        self.pending.links_traced += lazily;
-        self.pending.links_built_lazily += lazily;
-        self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
-
-        let t = Instant::now();
-        let gathered = gather::gather(&g.gather, lighting, &wanted, g.particles.len());
-        self.pending.area_particles_gathered += wanted.len() as u64;
-        self.pending.gathering_ms += t.elapsed().as_secs_f64() * 1e3;
-
-        let t = Instant::now();
-        let values = gather::estimate(&g.lists, keys, &gathered, &g.particles.areas, lighting.shares);
-        self.estimates.store(keys, &values);
-        self.pending.radiance_particles_estimated += keys.len() as u64;
-        self.pending.estimation_ms += t.elapsed().as_secs_f64() * 1e3;
-    }
-
-    /// Each shaded sample's pixel, radiance (emission, direct light, and ρ/π times the indirect
-    /// irradiance) and its noise-free part (without the sampled direct light), with the object hit.
-    fn shade(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<Sampled> {
-        let shaded = self.trace(ctx, samples);
-        let indirect = self.indirect(ctx, &shaded);
-        let t = Instant::now();
-        let out = shaded
-            .par_iter()
-            .zip(indirect)
-            .map(|(s, e)| {
-                let reflected = match &s.sample.hit {
-                    Some(hit) => hit.beta * hit.material(ctx.scene).diffuse_reflectance() * e * FRAC_1_PI,
-                    None => Rgb::BLACK,
-                };
-                let steady = s.sample.emitted + reflected;
-                Sampled { pixel: s.pixel, radiance: steady + s.direct, steady, object: s.sample.hit.map(|h| h.object) }
-            })
-            .collect();
-        self.pending.final_ms += t.elapsed().as_secs_f64() * 1e3;
-        out
-    }
-
-    /// Pixels that differ from the right or lower neighbour (the paper's aliased pixels): they
-    /// see another object, or their noise-free radiance differs by more than the relative
-    /// contrast. The sampled direct light is left out, or its noise would mark most pixels.
-    fn aliased(&self, first: &[Sampled], width: usize) -> Vec<usize> {
-        let contrast = self.config.supersample_contrast;
-        let y: Vec<f32> = first.iter().map(|s| s.steady.luminance()).collect();
-        let differs = |a: usize, b: usize| {
-            first[a].object != first[b].object || (y[a] - y[b]).abs() > contrast * y[a].max(y[b]).max(1e-6)
-        };
-        let mut marked = vec![false; y.len()];
-        for i in 0..y.len() {
-            for j in [i + 1, i + width] {
-                let same_row = j != i + 1 || (i + 1) % width != 0;
-                if j < y.len() && same_row && differs(i, j) {
-                    marked[i] = true;
-                    marked[j] = true;
-                }
-            }
-        }
-        (0..y.len()).filter(|&i| marked[i]).collect()
     }
 }
 
