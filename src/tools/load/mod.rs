@@ -159,9 +159,17 @@ pub fn technique(spec: &str) -> Result<TechniqueConfig> {
     }
 }
 
-/// The server's (resident bytes, seconds spent encoding frames, seconds spent ticking).
-async fn server_figures(http: &reqwest::Client, url: &str) -> (u64, f64, f64) {
-    let Ok(resp) = http.get(format!("{url}/metrics")).send().await else { return (0, 0.0, 0.0) };
+/// What the server's metrics say at one moment (zeros if it could not be asked).
+#[derive(Clone, Copy, Debug, Default)]
+struct ServerFigures {
+    resident_bytes: u64,
+    /// Seconds spent encoding frames and ticking, since the server started.
+    encode_s: f64,
+    tick_s: f64,
+}
+
+async fn server_figures(http: &reqwest::Client, url: &str) -> ServerFigures {
+    let Ok(resp) = http.get(format!("{url}/metrics")).send().await else { return ServerFigures::default() };
     let text = resp.text().await.unwrap_or_default();
     let value = |name: &str| -> f64 {
         text.lines()
@@ -169,11 +177,11 @@ async fn server_figures(http: &reqwest::Client, url: &str) -> (u64, f64, f64) {
             .and_then(|v| v.trim().parse().ok())
             .unwrap_or(0.0)
     };
-    (
-        value("relume_resident_memory_bytes") as u64,
-        value("relume_encode_seconds_total"),
-        value("relume_tick_seconds_sum"),
-    )
+    ServerFigures {
+        resident_bytes: value("relume_resident_memory_bytes") as u64,
+        encode_s: value("relume_encode_seconds_total"),
+        tick_s: value("relume_tick_seconds_sum"),
+    }
 }
 
 /// Runs the load and returns the report (used by the CLI and by tests).
@@ -187,34 +195,16 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         .map_err(|_| UsageError("--frames: png, jpg, exr or none".into()))?;
     let base = args.url.trim_end_matches('/').to_string();
     let http = super::http_client(args.token.as_deref(), args.timeout)?;
-    let (rss_start, encode_start, tick_start) = server_figures(&http, &base).await;
+    let start = server_figures(&http, &base).await;
 
     // Create the sessions first, so every stream starts together.
-    let mut ids = Vec::new();
-    for _ in 0..args.sessions {
-        let body =
-            serde_json::json!({"scene": args.scene, "technique": config, "width": args.width, "height": args.height});
-        let resp = http
-            .post(format!("{base}/v1/sessions"))
-            .json(&body)
-            .send()
-            .await
-            .with_context(|| format!("connecting to {base}"))?;
-        let status = resp.status();
-        let v: serde_json::Value = resp.json().await.unwrap_or_default();
-        if !status.is_success() {
-            // Those created so far would otherwise wait out the server's idle expiry.
-            delete_sessions(&http, &base, &ids).await;
-            return Err(anyhow::anyhow!("creating a session: {status}: {}", v["detail"].as_str().unwrap_or("")));
-        }
-        ids.push(v["id"].as_str().unwrap_or_default().to_string());
-    }
+    let ids = create_sessions(&http, &base, args, &config).await?;
     let started = Instant::now();
     let warm = {
         let (http, base, warmup) = (http.clone(), base.clone(), args.warmup);
         tokio::spawn(async move {
             tokio::time::sleep(warmup).await;
-            server_figures(&http, &base).await.0
+            server_figures(&http, &base).await.resident_bytes
         })
     };
     let ws_base = base.replacen("http", "ws", 1);
@@ -237,17 +227,57 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         );
     }
     let elapsed = started.elapsed().as_secs_f64();
-    let (rss_end, encode_end, tick_end) = server_figures(&http, &base).await;
+    let end = server_figures(&http, &base).await;
     let rss_warm = warm.await.unwrap_or(0);
     delete_sessions(&http, &base, &ids).await;
+    Ok(summarise(args, &reports, elapsed, (start, end), rss_warm))
+}
 
+/// Creates `args.sessions` sessions; if one fails, deletes those made so far (they would
+/// otherwise wait out the server's idle expiry) and returns the server's error.
+async fn create_sessions(
+    http: &reqwest::Client,
+    base: &str,
+    args: &LoadArgs,
+    config: &TechniqueConfig,
+) -> Result<Vec<String>> {
+    let mut ids = Vec::new();
+    for _ in 0..args.sessions {
+        let body =
+            serde_json::json!({"scene": args.scene, "technique": config, "width": args.width, "height": args.height});
+        let resp = http
+            .post(format!("{base}/v1/sessions"))
+            .json(&body)
+            .send()
+            .await
+            .with_context(|| format!("connecting to {base}"))?;
+        let status = resp.status();
+        let v: serde_json::Value = resp.json().await.unwrap_or_default();
+        if !status.is_success() {
+            delete_sessions(http, base, &ids).await;
+            return Err(anyhow::anyhow!("creating a session: {status}: {}", v["detail"].as_str().unwrap_or("")));
+        }
+        ids.push(v["id"].as_str().unwrap_or_default().to_string());
+    }
+    Ok(ids)
+}
+
+/// The run's report from the sessions' reports, the elapsed seconds, the server's figures at
+/// the start and end, and its resident bytes after the warm-up.
+fn summarise(
+    args: &LoadArgs,
+    reports: &[SessionReport],
+    elapsed: f64,
+    (start, end): (ServerFigures, ServerFigures),
+    rss_warm: u64,
+) -> LoadReport {
     let mut lat: Vec<f64> = reports.iter().flat_map(|r| r.latencies_ms.iter().copied()).collect();
     lat.sort_by(f64::total_cmp);
     let sum = |f: fn(&SessionReport) -> u64| reports.iter().map(f).sum::<u64>();
     let (sent, received) = (sum(|r| r.edits_sent), sum(|r| r.edits_received_by_server));
     let coalesced = sum(|r| r.edits_coalesced);
     let errors: Vec<String> = reports.iter().flat_map(|r| r.errors.iter().cloned()).collect();
-    Ok(LoadReport {
+    LoadReport {
         scene: args.scene.clone(),
         sessions: args.sessions,
         hz: args.hz,
@@ -266,16 +296,16 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
         bytes_received: sum(|r| r.bytes),
         errors: errors.len() as u64,
         error_samples: errors.into_iter().take(5).collect(),
-        server_rss_start_bytes: rss_start,
-        server_rss_end_bytes: rss_end,
+        server_rss_start_bytes: start.resident_bytes,
+        server_rss_end_bytes: end.resident_bytes,
         server_rss_warm_bytes: rss_warm,
-        rss_growth_after_warmup: if rss_warm > 0 { rss_end as f64 / rss_warm as f64 - 1.0 } else { 0.0 },
-        encode_to_tick_ratio: if tick_end > tick_start {
-            (encode_end - encode_start) / (tick_end - tick_start)
+        rss_growth_after_warmup: if rss_warm > 0 { end.resident_bytes as f64 / rss_warm as f64 - 1.0 } else { 0.0 },
+        encode_to_tick_ratio: if end.tick_s > start.tick_s {
+            (end.encode_s - start.encode_s) / (end.tick_s - start.tick_s)
         } else {
             0.0
         },
-    })
+    }
 }
 
 pub fn print_table(r: &LoadReport) {
