@@ -5,7 +5,8 @@ use super::protocol::{
     CreateSession, EditBatch, SceneList, SessionList, SessionView, StatsHistory, TechniqueEntry, TechniqueList,
     TickDone,
 };
-use super::state::{view, AppState};
+use super::state::{view, AppState, SessionEntry};
+use super::worker::PublishedFrame;
 use crate::film::ImageFormat;
 use axum::body::{Body, Bytes};
 use axum::extract::{FromRequest, Path, Query, Request, State};
@@ -281,56 +282,13 @@ pub async fn get_frame(
     query: Result<Query<FrameQuery>, axum::extract::rejection::QueryRejection>,
 ) -> Result<Response, ApiError> {
     let Query(q) = query.map_err(|e| ApiError::invalid(format!("query: {}", e.body_text())))?;
-    let format = match file.as_str() {
-        "frame.png" => ImageFormat::Png,
-        "frame.jpg" => ImageFormat::Jpeg,
-        "frame.exr" => ImageFormat::Exr,
-        _ => {
-            return Err(ApiError::not_found(format!(
-                "no resource '{file}' (frames are frame.png, frame.jpg or frame.exr)"
-            )))
-        }
-    };
+    let format = frame_format(&file)?;
     let exposure = q.exposure.unwrap_or(0.0);
     if !exposure.is_finite() || exposure.abs() > 32.0 {
         return Err(ApiError::invalid("exposure: must be a finite number of stops in [-32, 32]"));
     }
     let entry = s.session(&id)?;
-    let mut frames = entry.handle.frames.clone();
-    let wanted = q.tick;
-    // Wait (bounded) for the wanted tick; the watch borrow ends inside this block.
-    let waited = tokio::time::timeout(s.config.limits.frame_wait, async {
-        frames
-            .wait_for(|f| match (f, wanted) {
-                (Some(f), Some(t)) => f.tick >= t,
-                (_, None) => true,
-                (None, Some(_)) => false,
-            })
-            .await
-            .map(|f| f.clone())
-    })
-    .await;
-    let frame = match waited {
-        Ok(Ok(Some(f))) => f,
-        Ok(Ok(None)) => {
-            return Err(ApiError::not_found(
-                "no frame yet: POST .../tick first, or ask for ?tick=0 to wait for the first one",
-            ))
-        }
-        Ok(Err(_)) => {
-            return Err(match entry.handle.failure() {
-                Some(reason) => super::worker::failed(&reason),
-                None => ApiError::new(StatusCode::GONE, "session_closed", "the session has shut down"),
-            })
-        }
-        Err(_) => {
-            return Err(ApiError::new(
-                StatusCode::REQUEST_TIMEOUT,
-                "timeout",
-                format!("tick {} did not arrive within {:?}", wanted.unwrap_or(0), s.config.limits.frame_wait),
-            ))
-        }
-    };
+    let frame = wait_for_frame(&s, &entry, q.tick).await?;
     let key = EncodingKey::new(&frame, format, q.denoised == Some(false), exposure);
     let etag = HeaderValue::from_str(&key.etag()).map_err(|e| ApiError::internal(e.to_string()))?;
     let mut resp = if headers.get(header::IF_NONE_MATCH) == Some(&etag) {
@@ -357,6 +315,53 @@ pub async fn get_frame(
     h.insert("x-relume-accumulation-id", HeaderValue::from(frame.accumulation_id));
     h.insert("x-relume-spp", HeaderValue::from(frame.spp));
     Ok(resp)
+}
+
+/// The image format a frame's file name asks for.
+fn frame_format(file: &str) -> Result<ImageFormat, ApiError> {
+    match file {
+        "frame.png" => Ok(ImageFormat::Png),
+        "frame.jpg" => Ok(ImageFormat::Jpeg),
+        "frame.exr" => Ok(ImageFormat::Exr),
+        _ => Err(ApiError::not_found(format!("no resource '{file}' (frames are frame.png, frame.jpg or frame.exr)"))),
+    }
+}
+
+/// The session's latest frame once it is at least tick `wanted` (any frame when `None`),
+/// waiting at most the server's frame wait.
+async fn wait_for_frame(
+    s: &AppState,
+    entry: &SessionEntry,
+    wanted: Option<u64>,
+) -> Result<Arc<PublishedFrame>, ApiError> {
+    let mut frames = entry.handle.frames.clone();
+    // Wait (bounded) for the wanted tick; the watch borrow ends inside this block.
+    let waited = tokio::time::timeout(s.config.limits.frame_wait, async {
+        frames
+            .wait_for(|f| match (f, wanted) {
+                (Some(f), Some(t)) => f.tick >= t,
+                (_, None) => true,
+                (None, Some(_)) => false,
+            })
+            .await
+            .map(|f| f.clone())
+    })
+    .await;
+    match waited {
+        Ok(Ok(Some(f))) => Ok(f),
+        Ok(Ok(None)) => {
+            Err(ApiError::not_found("no frame yet: POST .../tick first, or ask for ?tick=0 to wait for the first one"))
+        }
+        Ok(Err(_)) => Err(match entry.handle.failure() {
+            Some(reason) => super::worker::failed(&reason),
+            None => ApiError::new(StatusCode::GONE, "session_closed", "the session has shut down"),
+        }),
+        Err(_) => Err(ApiError::new(
+            StatusCode::REQUEST_TIMEOUT,
+            "timeout",
+            format!("tick {} did not arrive within {:?}", wanted.unwrap_or(0), s.config.limits.frame_wait),
+        )),
+    }
 }
 
 #[derive(Deserialize)]
