@@ -13,6 +13,7 @@ use super::error::ApiError;
 use super::protocol::{ClientMessage, FrameFormat, FrameHeader, PlayingAnimation, ServerMessage};
 use super::routes::{parse_body, Shared};
 use super::state::{valid_name, SessionEntry};
+use super::worker::PublishedFrame;
 use crate::film::ImageFormat;
 use crate::scene::animation::Animation;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
@@ -115,6 +116,48 @@ fn text(m: &ServerMessage) -> Message {
     Message::Text(serde_json::to_string(m).unwrap_or_default().into())
 }
 
+/// Sends one published frame as `sub` asks: its stats (with the frames this subscriber has
+/// dropped so far), then the encoded image behind its header. A frame that fails to encode
+/// is skipped; an error means the socket is gone.
+async fn send_frame(
+    socket: &mut WebSocket,
+    state: &Shared,
+    entry: &Arc<SessionEntry>,
+    sub: &Subscription,
+    frame: Arc<PublishedFrame>,
+    dropped: u64,
+) -> Result<(), axum::Error> {
+    if sub.stats {
+        let m = text(&ServerMessage::Stats { stats: Box::new(frame.stats.clone()), frames_dropped: dropped });
+        if let Message::Text(t) = &m {
+            state.metrics.sent(t.len());
+        }
+        socket.send(m).await?;
+    }
+    let format = match sub.frames {
+        FrameFormat::Png => ImageFormat::Png,
+        FrameFormat::Jpg => ImageFormat::Jpeg,
+        FrameFormat::Exr => ImageFormat::Exr,
+        FrameFormat::None => return Ok(()),
+    };
+    let header = FrameHeader {
+        tick: frame.tick,
+        accumulation_id: frame.accumulation_id,
+        format: sub.frames,
+        width: frame.image.width,
+        height: frame.image.height,
+    };
+    let key = EncodingKey::new(&frame, format, !sub.denoised, 0.0);
+    let (metrics, shared) = (state.metrics.clone(), entry.clone());
+    let encoded = tokio::task::spawn_blocking(move || shared.handle.encoded.get(&frame, key, &metrics));
+    let Ok(Ok(bytes)) = encoded.await else { return Ok(()) };
+    let mut payload = Vec::with_capacity(bytes.len() + 32);
+    payload.extend_from_slice(&header.encode());
+    payload.extend_from_slice(&bytes);
+    state.metrics.sent(payload.len());
+    socket.send(Message::Binary(payload.into())).await
+}
+
 async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
     let mut frames = entry.handle.frames.clone();
     frames.mark_unchanged();
@@ -164,31 +207,7 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
                 if frame.tick % sub.every as u64 != 0 {
                     continue;
                 }
-                if sub.stats {
-                    let m = text(&ServerMessage::Stats { stats: Box::new(frame.stats.clone()), frames_dropped: dropped });
-                    if let Message::Text(t) = &m {
-                        state.metrics.sent(t.len());
-                    }
-                    if socket.send(m).await.is_err() {
-                        break;
-                    }
-                }
-                let format = match sub.frames {
-                    FrameFormat::Png => ImageFormat::Png,
-                    FrameFormat::Jpg => ImageFormat::Jpeg,
-                    FrameFormat::Exr => ImageFormat::Exr,
-                    FrameFormat::None => continue,
-                };
-                let header = FrameHeader { tick: frame.tick, accumulation_id: frame.accumulation_id, format: sub.frames, width: frame.image.width, height: frame.image.height };
-                let key = EncodingKey::new(&frame, format, !sub.denoised, 0.0);
-                let (metrics, shared) = (state.metrics.clone(), entry.clone());
-                let encoded = tokio::task::spawn_blocking(move || shared.handle.encoded.get(&frame, key, &metrics));
-                let Ok(Ok(bytes)) = encoded.await else { continue };
-                let mut payload = Vec::with_capacity(bytes.len() + 32);
-                payload.extend_from_slice(&header.encode());
-                payload.extend_from_slice(&bytes);
-                state.metrics.sent(payload.len());
-                if socket.send(Message::Binary(payload.into())).await.is_err() {
+                if send_frame(&mut socket, &state, &entry, &sub, frame, dropped).await.is_err() {
                     break;
                 }
             }
