@@ -272,14 +272,9 @@ impl AtomicFlags {
         AtomicFlags((0..len).map(|_| AtomicBool::new(false)).collect())
     }
 
-    /// Sets flag `i`. Most flags are set many times over (one record serves many samples):
-    /// reading first leaves a set flag's cache line shared between the threads instead of
-    /// bouncing it between them on every store.
     fn set(&self, i: u32) {
         if let Some(flag) = self.0.get(i as usize) {
-            if !flag.load(Ordering::Relaxed) {
-                flag.store(true, Ordering::Relaxed);
-            }
+            flag.store(true, Ordering::Relaxed);
         }
     }
 

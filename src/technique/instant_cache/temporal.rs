@@ -235,7 +235,7 @@ impl TickChanges {
             .map(|(k, (vpl, change))| {
                 let old = match *change {
                     VplChange::Same(o) | VplChange::Reweighted(o) => o as usize,
-                    VplChange::Invalidated => return self.retrace(accel, vpl, p, n, min_distance, &mut work),
+                    VplChange::Invalidated => return self.retrace(accel, vpl, &at, &mut work),
                 };
                 let before = record.contributions.get(old).copied().unwrap_or(0);
                 let cones = (in_new[k], in_old[k]);
@@ -282,7 +282,7 @@ impl TickChanges {
             let was_tiny =
                 irradiance_from(old_vpl, p, n, min_distance).is_some_and(|(e_old, _, _)| rgbe::pack(e_old) == 0);
             if was_tiny {
-                return self.retrace(accel, vpl, p, n, min_distance, work);
+                return self.retrace(accel, vpl, at, work);
             }
         }
         let visible = self.still_visible(accel, vpl, from, visible_before, cones, work);
@@ -297,8 +297,8 @@ impl TickChanges {
     }
 
     /// Cases 1–2: the VPL changed; trace its visibility ray against the full scene.
-    fn retrace(&self, accel: &SceneAccel, vpl: &Vpl, p: Vec3, n: Vec3, min_distance: f32, work: &mut Refresh) -> u32 {
-        let (c, rays) = contribution(accel, vpl, p, n, min_distance);
+    fn retrace(&self, accel: &SceneAccel, vpl: &Vpl, at: &RecordPoint, work: &mut Refresh) -> u32 {
+        let (c, rays) = contribution(accel, vpl, at.p, at.n, at.min_distance);
         work.vpl_rays += rays;
         c
     }
