@@ -75,8 +75,16 @@ fn moved_objects_are_hit_at_their_new_place() {
     let accel = session.accel();
     let hit = accel.scene().intersect1(&probe_from(100.0)).unwrap();
     assert_ne!(accel.resolve(&hit).unwrap().0, SurfaceId::Object(bunny as u32), "old place still occupied");
-    let hit = accel.scene().intersect1(&probe_from(540.0)).unwrap();
-    assert_eq!(accel.resolve(&hit).unwrap().0, SurfaceId::Object(bunny as u32), "new place empty");
+    let probe = probe_from(540.0);
+    let hit = accel.scene().intersect1(&probe).unwrap();
+    let (surface, prim) = accel.resolve(&hit).unwrap();
+    assert_eq!(surface, SurfaceId::Object(bunny as u32), "new place empty");
+    // The scene's per-triangle hit records moved too: the resolved point is where Embree hit,
+    // and the normal faces the ray (the bunny is closed and wound outward).
+    let sp = session.scene().surface_point(surface, prim, hit.u, hit.v);
+    let traced = probe.origin + probe.dir * hit.t;
+    assert!(sp.p.distance(traced) < 1e-3 * hit.t.max(1.0), "resolved at {} but hit at {traced}", sp.p);
+    assert!(sp.n.dot(probe.dir) < 0.0, "normal {} does not face the ray", sp.n);
 }
 
 #[test]

@@ -19,7 +19,7 @@
 //! the same side of the same object, so every shading point gets an estimate.
 use super::grid::ObjectGrids;
 use super::particles::{pose, AreaParticles};
-use crate::scene::Scene;
+use crate::scene::{HitTriangle, Scene};
 use glam::{Vec2, Vec3};
 
 /// A radiance particle on one side: `object << OBJECT_SHIFT | id << 1 | side`, its id counted
@@ -91,9 +91,7 @@ impl Tessellation {
         let o = &scene.objects[object];
         let diffuse = !scene.materials[o.material as usize].is_specular();
         let (mut first, mut level, mut next) = (Vec::new(), Vec::new(), 0u64);
-        for &[a, b, c] in o.mesh.triangles.iter().filter(|_| diffuse) {
-            let (a, b, c) =
-                (o.world_positions[a as usize], o.world_positions[b as usize], o.world_positions[c as usize]);
+        for &HitTriangle { vertices: [a, b, c], .. } in o.hit_triangles.iter().filter(|_| diffuse) {
             let edge = (b - a).length().max((c - b).length()).max((a - c).length());
             let m = ((edge / max_edge).ceil() as u32).clamp(1, u16::MAX as u32 / 2);
             first.push(next.min(u32::MAX as u64) as u32);
