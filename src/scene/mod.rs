@@ -248,13 +248,21 @@ impl Scene {
                 let t = &self.objects[i as usize].hit_triangles[prim as usize];
                 (t.vertices, t.normal)
             }
-            SurfaceId::Light(_) => {
-                let [a, b, c] = self.triangle(surface, prim);
-                ([a, b, c], (b - a).cross(c - a).normalize_or_zero())
-            }
+            SurfaceId::Light(_) => (self.triangle(surface, prim), self.normal(surface, prim)),
         };
         let p = a * (1.0 - u - v) + b * u + c * v;
         SurfacePoint { p, n, surface, prim }
+    }
+
+    /// Unit geometric normal of a triangle, from its winding (zero for a light without one).
+    pub fn normal(&self, surface: SurfaceId, prim: u32) -> Vec3 {
+        match surface {
+            SurfaceId::Object(i) => self.objects[i as usize].hit_triangles[prim as usize].normal,
+            SurfaceId::Light(_) => {
+                let [a, b, c] = self.triangle(surface, prim);
+                (b - a).cross(c - a).normalize_or_zero()
+            }
+        }
     }
 
     /// Area-weighted mean reflectance ρ_S of the scene's objects (Novák et al. 2010, §3.3).

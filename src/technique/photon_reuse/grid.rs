@@ -147,8 +147,7 @@ fn photon_at(
     if !diffuse[object as usize] {
         return None;
     }
-    let [a, b, c] = scene.triangle(SurfaceId::Object(object), prim);
-    let n = (b - a).cross(c - a).normalize_or_zero();
+    let n = scene.normal(SurfaceId::Object(object), prim);
     let incoming = row.incoming[path].get();
     let photon = GridPhoton {
         position: row.position[path],

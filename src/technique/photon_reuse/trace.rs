@@ -227,8 +227,7 @@ fn offset_towards(position: Vec3, n: Vec3, dir: Vec3) -> Vec3 {
 
 /// Unit geometric normal of the triangle a photon lies on.
 pub fn surface_normal(scene: &Scene, p: &Photon) -> Vec3 {
-    let [a, b, c] = scene.triangle(SurfaceId::Object(p.object), p.prim);
-    (b - a).cross(c - a).normalize_or_zero()
+    scene.normal(SurfaceId::Object(p.object), p.prim)
 }
 
 /// Samples the BSDF at a photon; returns the next ray and flux, divided by the continuation
