@@ -120,9 +120,7 @@ impl Tracer<'_> {
 
     /// Traces path `path` as `how` says, reading the store and returning the new tail.
     pub fn trace(&self, store: &PathStore, path: usize, how: Retrace) -> TracedTail {
-        let (scene, accel) = (self.scene, self.accel);
         let mut rng = Rng::for_sample(self.seed, self.epoch, path as u64, PHOTON_STREAM);
-        let max = store.max_photons as u32;
         let mut tail = TracedTail {
             path,
             from: 0,
@@ -132,14 +130,32 @@ impl Tracer<'_> {
             cell: None,
             rays: 0,
         };
+        let Some((origin, dir, power, from)) = self.segment_start(store, path, how, &mut rng, &mut tail) else {
+            return tail;
+        };
+        tail.from = from;
+        self.follow(store, &mut tail, (origin, dir, power), &mut rng);
+        tail
+    }
 
-        // Where the traced segment starts, where it goes, with what flux.
-        let (mut origin, mut dir, mut power, from) = match how {
+    /// Where the traced segment of `path` starts, where it goes, with what flux, and its first
+    /// row. `None` when there is nothing to trace: `tail` is then complete (an emission that
+    /// failed, or a path that roulette or a black weight ends at row `tail.from`).
+    fn segment_start(
+        &self,
+        store: &PathStore,
+        path: usize,
+        how: Retrace,
+        rng: &mut Rng,
+        tail: &mut TracedTail,
+    ) -> Option<(Vec3, Vec3, Rgb, u32)> {
+        let scene = self.scene;
+        Some(match how {
             Retrace::Emit | Retrace::Fill(_) => {
                 let cell = if let Retrace::Fill(c) = how { Some(c) } else { None };
-                let Some((o, d, power)) = self.emit(store, path, cell, &mut rng) else {
+                let Some((o, d, power)) = self.emit(store, path, cell, rng) else {
                     tail.emission = Some((path_origin(scene, store, path), PackedDir::new(Vec3::Z), Rgb::BLACK));
-                    return tail;
+                    return None;
                 };
                 tail.emission = Some((o, PackedDir::new(d), power));
                 let frame = self.frames.get(store.light_of(path)).copied().flatten();
@@ -163,26 +179,36 @@ impl Tracer<'_> {
                 let q = w.max_component().min(1.0);
                 if q <= 0.0 {
                     tail.from = k;
-                    return tail;
+                    return None;
                 }
                 (leaving(scene, &prev, escape), escape, prev.power * w / q, k)
             }
             Retrace::FreshFrom(k) | Retrace::Redirect(k) => {
                 let prev = photon_at(store, path, k as usize - 1);
                 let roulette = matches!(how, Retrace::FreshFrom(_));
-                match scatter(scene, &prev, &mut rng, roulette) {
+                match scatter(scene, &prev, rng, roulette) {
                     Some((o, d, p)) => (o, d, p, k),
                     None => {
                         tail.from = k;
-                        return tail;
+                        return None;
                     }
                 }
             }
-        };
-        tail.from = from;
+        })
+    }
 
-        // Follow the path until roulette, a light, the photon limit, or the scene's end.
-        let mut row = from;
+    /// Follows a segment until roulette, a light, the photon limit, or the scene's end, adding
+    /// a photon to `tail` at every object hit.
+    fn follow(
+        &self,
+        store: &PathStore,
+        tail: &mut TracedTail,
+        (mut origin, mut dir, mut power): (Vec3, Vec3, Rgb),
+        rng: &mut Rng,
+    ) {
+        let (scene, accel) = (self.scene, self.accel);
+        let max = store.max_photons as u32;
+        let mut row = tail.from;
         while row < max {
             tail.rays += 1;
             let Some(hit) = accel.scene().intersect1(&Ray::new(origin, dir)) else {
@@ -202,7 +228,7 @@ impl Tracer<'_> {
             if row >= max {
                 break;
             }
-            match scatter(scene, &photon, &mut rng, true) {
+            match scatter(scene, &photon, rng, true) {
                 Some((o, d, p)) => {
                     origin = o;
                     dir = d;
@@ -211,7 +237,6 @@ impl Tracer<'_> {
                 None => break,
             }
         }
-        tail
     }
 }
 
