@@ -148,35 +148,7 @@ pub fn measure(args: &ParticlesArgs) -> Result<ParticlesReport> {
     let (build, relit) = (stats(&build_frame)?, stats(&relight_frame)?);
     let link_update = match &args.anim {
         None => None,
-        Some(_) => {
-            let mut runs = Vec::new();
-            for incremental in [true, false] {
-                bar.set_message(if incremental { "incremental links" } else { "full link rebuilds" });
-                let mut figures = Vec::new();
-                run.play(&config(incremental), args.seed, args.frames, args.fps, |_, frame| {
-                    figures.push((stats(frame)?, frame.image.clone()));
-                    bar.inc(1);
-                    Ok(())
-                })?;
-                runs.push(figures);
-            }
-            let moving = |f: &[(ParticleStats, crate::film::LinearImage)], x: fn(&ParticleStats) -> f64| {
-                quantile(&f[1..].iter().map(|(s, _)| x(s)).collect::<Vec<_>>(), 0.5)
-            };
-            let (inc, full) = (&runs[0], &runs[1]);
-            let inc_ms = moving(inc, |s| s.geometry_ms);
-            let full_ms = moving(full, |s| s.geometry_ms);
-            Some(LinkUpdate {
-                frames: args.frames,
-                links_total: build.links_total,
-                incremental_links_median: moving(inc, |s| s.links_traced as f64),
-                full_links_median: moving(full, |s| s.links_traced as f64),
-                incremental_geometry_ms_median: inc_ms,
-                full_geometry_ms_median: full_ms,
-                speedup: full_ms / inc_ms.max(1e-9),
-                images_equal: inc.iter().zip(full).all(|(a, b)| a.1 == b.1),
-            })
-        }
+        Some(_) => Some(link_update(args, &run, &config, &build, &bar)?),
     };
     bar.finish_and_clear();
     let relight_tick_ms = relight_frame.stats.times.total_ms;
@@ -193,6 +165,44 @@ pub fn measure(args: &ParticlesArgs) -> Result<ParticlesReport> {
         build,
         relight: relit,
         link_update,
+    })
+}
+
+/// Plays the animation with incremental links and with full link rebuilds, and compares the
+/// links traced, the geometry stage's time and the images.
+fn link_update(
+    args: &ParticlesArgs,
+    run: &AnimationRun,
+    config: &dyn Fn(bool) -> TechniqueConfig,
+    build: &ParticleStats,
+    bar: &indicatif::ProgressBar,
+) -> Result<LinkUpdate> {
+    let mut runs = Vec::new();
+    for incremental in [true, false] {
+        bar.set_message(if incremental { "incremental links" } else { "full link rebuilds" });
+        let mut figures = Vec::new();
+        run.play(&config(incremental), args.seed, args.frames, args.fps, |_, frame| {
+            figures.push((stats(frame)?, frame.image.clone()));
+            bar.inc(1);
+            Ok(())
+        })?;
+        runs.push(figures);
+    }
+    let moving = |f: &[(ParticleStats, crate::film::LinearImage)], x: fn(&ParticleStats) -> f64| {
+        quantile(&f[1..].iter().map(|(s, _)| x(s)).collect::<Vec<_>>(), 0.5)
+    };
+    let (inc, full) = (&runs[0], &runs[1]);
+    let inc_ms = moving(inc, |s| s.geometry_ms);
+    let full_ms = moving(full, |s| s.geometry_ms);
+    Ok(LinkUpdate {
+        frames: args.frames,
+        links_total: build.links_total,
+        incremental_links_median: moving(inc, |s| s.links_traced as f64),
+        full_links_median: moving(full, |s| s.links_traced as f64),
+        incremental_geometry_ms_median: inc_ms,
+        full_geometry_ms_median: full_ms,
+        speedup: full_ms / inc_ms.max(1e-9),
+        images_equal: inc.iter().zip(full).all(|(a, b)| a.1 == b.1),
     })
 }
 
