@@ -108,9 +108,14 @@ pub struct HitTriangle {
 fn hit_triangles(positions: &[Vec3], mesh: &Mesh) -> Vec<HitTriangle> {
     let triangle = |&[a, b, c]: &[u32; 3]| {
         let (a, b, c) = (positions[a as usize], positions[b as usize], positions[c as usize]);
-        HitTriangle { vertices: [a, b, c], normal: (b - a).cross(c - a).normalize_or_zero() }
+        HitTriangle { vertices: [a, b, c], normal: unit_normal([a, b, c]) }
     };
     mesh.triangles.iter().map(triangle).collect()
+}
+
+/// Unit normal of a triangle from its winding; zero for a degenerate one.
+fn unit_normal([a, b, c]: [Vec3; 3]) -> Vec3 {
+    (b - a).cross(c - a).normalize_or_zero()
 }
 
 fn world_positions(mesh: &Mesh, xf: &Affine3A) -> Vec<Vec3> {
@@ -248,7 +253,10 @@ impl Scene {
                 let t = &self.objects[i as usize].hit_triangles[prim as usize];
                 (t.vertices, t.normal)
             }
-            SurfaceId::Light(_) => (self.triangle(surface, prim), self.normal(surface, prim)),
+            SurfaceId::Light(_) => {
+                let t = self.triangle(surface, prim);
+                (t, unit_normal(t))
+            }
         };
         let p = a * (1.0 - u - v) + b * u + c * v;
         SurfacePoint { p, n, surface, prim }
@@ -258,10 +266,7 @@ impl Scene {
     pub fn normal(&self, surface: SurfaceId, prim: u32) -> Vec3 {
         match surface {
             SurfaceId::Object(i) => self.objects[i as usize].hit_triangles[prim as usize].normal,
-            SurfaceId::Light(_) => {
-                let [a, b, c] = self.triangle(surface, prim);
-                (b - a).cross(c - a).normalize_or_zero()
-            }
+            SurfaceId::Light(_) => unit_normal(self.triangle(surface, prim)),
         }
     }
 

@@ -158,31 +158,12 @@ pub fn trace_chunk<P: LanePath>(
             }
         }
         stats.rays.shadow += shadows.len() as u64;
-        for batch in shadows.chunks(w) {
-            let mut shadow_rays = [Ray::new(Vec3::ZERO, Vec3::Z); MAX_LANES];
-            let mut shadow_active = [false; MAX_LANES];
-            let mut occluded = [false; MAX_LANES];
-            for (k, s) in batch.iter().enumerate() {
-                shadow_rays[k] = s.ray;
-                shadow_active[k] = true;
-            }
-            committed.occluded_lanes(&shadow_rays[..w], &shadow_active[..w], &mut occluded[..w]);
-            for (k, s) in batch.iter().enumerate() {
-                if !occluded[k] {
-                    lanes[s.lane].path.add(s.contribution);
-                }
-            }
-        }
+        trace_shadows(committed, &shadows, w, &mut lanes);
 
         // Record ended paths and regenerate.
         for lane in lanes.iter_mut() {
             if lane.active && lane.path.done() {
-                let pixel = &mut accum[lane.pixel];
-                pixel.add(lane.path.radiance());
-                pixel.count += 1.0;
-                stats.paths += 1;
-                stats.truncated_paths += lane.path.truncated() as u64;
-                lane.active = false;
+                record(lane, accum, &mut stats);
                 if settings.regeneration {
                     queue.start_next(lane, ctx, scene);
                 }
@@ -190,4 +171,39 @@ pub fn trace_chunk<P: LanePath>(
         }
     }
     stats
+}
+
+/// Traces the lanes' shadow tests W at a time and adds each clear test's contribution to its
+/// lane's path.
+fn trace_shadows<P: LanePath>(
+    committed: &crate::embree::CommittedScene,
+    shadows: &[ShadowTest],
+    w: usize,
+    lanes: &mut [Lane<P>],
+) {
+    for batch in shadows.chunks(w) {
+        let mut shadow_rays = [Ray::new(Vec3::ZERO, Vec3::Z); MAX_LANES];
+        let mut shadow_active = [false; MAX_LANES];
+        let mut occluded = [false; MAX_LANES];
+        for (k, s) in batch.iter().enumerate() {
+            shadow_rays[k] = s.ray;
+            shadow_active[k] = true;
+        }
+        committed.occluded_lanes(&shadow_rays[..w], &shadow_active[..w], &mut occluded[..w]);
+        for (k, s) in batch.iter().enumerate() {
+            if !occluded[k] {
+                lanes[s.lane].path.add(s.contribution);
+            }
+        }
+    }
+}
+
+/// Adds an ended path to its pixel and the stats, and idles its lane.
+fn record<P: LanePath>(lane: &mut Lane<P>, accum: &mut [PixelAccum], stats: &mut PathStats) {
+    let pixel = &mut accum[lane.pixel];
+    pixel.add(lane.path.radiance());
+    pixel.count += 1.0;
+    stats.paths += 1;
+    stats.truncated_paths += lane.path.truncated() as u64;
+    lane.active = false;
 }
