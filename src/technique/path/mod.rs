@@ -9,7 +9,9 @@
 //!    queue. A queue holds W·max(1, round(T_r / l_a)) pixels, l_a = 1/(1 − ρ_S) the expected
 //!    path length in steps, so that it keeps its packet busy for about T_r steps.
 //! 2. Each of `spp` passes traces one jittered camera path per pixel.
-//! 3. Each step traces one closest-hit packet and one shadow packet (`lanes.rs`): emission
+//! 3. A queue's camera rays are traced first, 16 neighbouring pixels to a coherent packet
+//!    (`packets.rs`; the image is bit-identical to tracing them in the lanes' packets).
+//!    Each step traces one closest-hit packet and one shadow packet (`lanes.rs`): emission
 //!    (MIS-weighted for area lights), next-event estimation to one light chosen by power, BSDF
 //!    sampling, Russian roulette by throughput.
 //! 4. Regeneration phase (§3.2): while the packet's queue lasts (about T_r steps), a lane whose
@@ -33,7 +35,7 @@
 //! | `spp` | 1 | paths per pixel per tick |
 //! | `regeneration` | true | refill ended lanes during the regeneration phase |
 //! | `regeneration_steps` | 100 | T_r, the regeneration phase in steps (the paper's value); sets the queue length |
-//! | `packet_width` | 8 | lanes per packet: 1 (single rays), 8 or 16 |
+//! | `packet_width` | 8 | lanes per packet: 1 (single rays), 8 or 16; camera rays go 16 to a packet |
 //! | `admitted_truncation` | 0.01 | c, the fraction of paths l_m may cut short |
 //! | `max_path_length` | none | overrides l_m (1 = direct light only) |
 //! | `preview_filter` | none | edge-preserving bilateral filter on the output (biased; previews) |
