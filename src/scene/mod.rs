@@ -96,7 +96,7 @@ pub struct SurfacePoint {
 /// One triangle as a hit reads it: its world vertices and unit geometric normal, 64 bytes
 /// aligned to a cache line. Resolving a hit through it is one load after the object, where the
 /// indexed mesh needs four dependent ones (the triangle, then each vertex) and a normalize:
-/// 3–17% more `path` samples/s on the Cornell box, one thread (`docs/benchmarks.md`). It costs
+/// 3–20% (median 11%) more `path` samples/s on the Cornell box, one thread (`docs/benchmarks.md`). It costs
 /// 64 bytes per object triangle.
 #[derive(Clone, Copy, Debug)]
 #[repr(C, align(64))]
