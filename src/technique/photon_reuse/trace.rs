@@ -130,17 +130,15 @@ impl Tracer<'_> {
             cell: None,
             rays: 0,
         };
-        let Some((origin, dir, power, from)) = self.segment_start(store, path, how, &mut rng, &mut tail) else {
-            return tail;
-        };
-        tail.from = from;
-        self.follow(store, &mut tail, (origin, dir, power), &mut rng);
+        if let Some(start) = self.segment_start(store, path, how, &mut rng, &mut tail) {
+            self.follow(store, &mut tail, start, &mut rng);
+        }
         tail
     }
 
-    /// Where the traced segment of `path` starts, where it goes, with what flux, and its first
-    /// row. `None` when there is nothing to trace: `tail` is then complete (an emission that
-    /// failed, or a path that roulette or a black weight ends at row `tail.from`).
+    /// Where the traced segment of `path` starts, where it goes and with what flux; sets
+    /// `tail.from`, its first row. `None` when there is nothing to trace: `tail` is then complete
+    /// (an emission that failed, or a path that roulette or a black weight ends at `tail.from`).
     fn segment_start(
         &self,
         store: &PathStore,
@@ -148,9 +146,9 @@ impl Tracer<'_> {
         how: Retrace,
         rng: &mut Rng,
         tail: &mut TracedTail,
-    ) -> Option<(Vec3, Vec3, Rgb, u32)> {
+    ) -> Option<(Vec3, Vec3, Rgb)> {
         let scene = self.scene;
-        Some(match how {
+        let (origin, dir, power, from) = match how {
             Retrace::Emit | Retrace::Fill(_) => {
                 let cell = if let Retrace::Fill(c) = how { Some(c) } else { None };
                 let Some((o, d, power)) = self.emit(store, path, cell, rng) else {
@@ -194,7 +192,9 @@ impl Tracer<'_> {
                     }
                 }
             }
-        })
+        };
+        tail.from = from;
+        Some((origin, dir, power))
     }
 
     /// Follows a segment until roulette, a light, the photon limit, or the scene's end, adding
