@@ -4,9 +4,7 @@
 //! Units follow pbrt-v4: point and spot intensity in W/sr, area radiance in W/(sr·m²), power in W.
 //! Area lights emit from the side their triangles' winding normal faces, and are sampled
 //! uniformly by area over their (tessellated) triangles, so the sampled shape is exactly the
-//! intersectable one. A rectangle is sampled directly over its two edges, with no choice of
-//! triangle: the same density, and 1.07–1.17× `path`'s samples/s on the Cornell box
-//! (`docs/benchmarks.md`).
+//! intersectable one.
 use super::model::{EmitterDesc, LightDesc};
 use super::shapes::Mesh;
 use crate::core::sampling::{self, DiscreteDistribution};
@@ -29,15 +27,13 @@ pub enum LightGeometry {
         cos_falloff_end: f32,
     },
     /// `normals[i]` is triangle i's unit normal (its emitting side), kept so sampling a point
-    /// costs no cross product. A rectangle also keeps `rect`, a corner and its two edges, so a
-    /// point on it is sampled directly instead of through a choice of triangle.
+    /// costs no cross product.
     Area {
         radiance: Rgb,
         triangles: Vec<[Vec3; 3]>,
         normals: Vec<Vec3>,
         area: f32,
         by_area: DiscreteDistribution,
-        rect: Option<[Vec3; 3]>,
     },
 }
 
@@ -98,19 +94,14 @@ pub fn emitter_mesh(emitter: &EmitterDesc) -> Option<Mesh> {
     }
 }
 
-/// A point uniformly distributed by area over an area light's triangles, with its unit normal:
-/// on a rectangle (`rect`: a corner and two edges) directly, else by choosing a triangle by
-/// area. `by_area` must not be empty.
+/// A point uniformly distributed by area over an area light's triangles, with its unit normal.
+/// `by_area` must not be empty.
 fn sample_area_point(
     triangles: &[[Vec3; 3]],
     normals: &[Vec3],
     by_area: &DiscreteDistribution,
-    rect: Option<&[Vec3; 3]>,
     u: Vec2,
 ) -> (Vec3, Vec3) {
-    if let Some([corner, along_u, along_v]) = rect {
-        return (*corner + *along_u * u.x + *along_v * u.y, normals[0]);
-    }
     let (i, _, u0) = by_area.sample(u.x);
     let [a, b, c] = triangles[i];
     let bary = sampling::uniform_triangle(Vec2::new(u0, u.y));
@@ -153,10 +144,7 @@ impl LightGeometry {
                 let area = areas.iter().sum();
                 let by_area = DiscreteDistribution::new(&areas).unwrap_or_default();
                 let normals = triangles.iter().map(|[a, b, c]| (*b - *a).cross(*c - *a).normalize_or_zero()).collect();
-                // `Mesh::quad` winds (-1,-1), (1,-1), (1,1) and (-1,-1), (1,1), (-1,1).
-                let rect = matches!(desc.emitter, EmitterDesc::Rect { .. })
-                    .then(|| [triangles[0][0], triangles[0][1] - triangles[0][0], triangles[1][2] - triangles[0][0]]);
-                LightGeometry::Area { radiance: *radiance, triangles, normals, area, by_area, rect }
+                LightGeometry::Area { radiance: *radiance, triangles, normals, area, by_area }
             }
             (
                 EmitterDesc::Rect { radiance }
@@ -169,7 +157,6 @@ impl LightGeometry {
                 normals: Vec::new(),
                 area: 0.0,
                 by_area: DiscreteDistribution::default(),
-                rect: None,
             },
         }
     }
@@ -235,11 +222,11 @@ impl LightGeometry {
                     normal: Vec3::ZERO,
                 })
             }
-            LightGeometry::Area { radiance, triangles, normals, area, by_area, rect } => {
+            LightGeometry::Area { radiance, triangles, normals, area, by_area } => {
                 if by_area.is_empty() {
                     return None;
                 }
-                let (q, n) = sample_area_point(triangles, normals, by_area, rect.as_ref(), u);
+                let (q, n) = sample_area_point(triangles, normals, by_area, u);
                 let d = q - p;
                 let dist2 = d.length_squared();
                 let dist = dist2.sqrt();
@@ -287,11 +274,11 @@ impl LightGeometry {
                 let local = sampling::uniform_cone(u_dir, *cos_falloff_end);
                 (*position, crate::core::ShadingFrame::from_normal(*axis).to_world(local))
             }
-            LightGeometry::Area { triangles, normals, by_area, rect, .. } => {
+            LightGeometry::Area { triangles, normals, by_area, .. } => {
                 if by_area.is_empty() {
                     return None;
                 }
-                let (on_light, n) = sample_area_point(triangles, normals, by_area, rect.as_ref(), u_pos);
+                let (on_light, n) = sample_area_point(triangles, normals, by_area, u_pos);
                 let dir = crate::core::ShadingFrame::from_normal(n).to_world(sampling::cosine_hemisphere(u_dir));
                 // Off the light's surface, so the ray cannot hit its own light.
                 (crate::core::offset_ray_origin(on_light, n), dir)
