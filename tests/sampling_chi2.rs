@@ -136,6 +136,7 @@ fn overhead(emitter: EmitterDesc, h: f32, sx: f32, sy: f32) -> LightGeometry {
 fn rect_light_points_are_uniform_by_area() {
     // Sampled points, mapped back to the rect's [0,1]² parameters, must fill a 10×20 grid evenly.
     let light = overhead(EmitterDesc::Rect { radiance: Rgb::WHITE }, 1.0, 1.0, 0.5);
+    assert!(matches!(light, LightGeometry::Area { parallelogram: Some(_), .. }), "not sampled over its edges");
     let mut rng = Rng::new(3, 9);
     let mut observed = vec![0u64; COS_BINS * PHI_BINS];
     for _ in 0..SAMPLES {
@@ -150,6 +151,43 @@ fn rect_light_points_are_uniform_by_area() {
     let expected = vec![1.0 / (COS_BINS * PHI_BINS) as f64; COS_BINS * PHI_BINS];
     let p = chi2_p_value(&observed, &expected, SAMPLES);
     assert!(p > SIGNIFICANCE, "p = {p}");
+}
+
+/// A mesh light 1 above the origin, facing down, from corners in the plane z = 1.
+fn mesh_light(corners: [[f32; 2]; 4], indices: [[u32; 3]; 2]) -> LightGeometry {
+    let positions = corners.map(|[x, y]| [x, y, 1.0]);
+    let emitter = EmitterDesc::Mesh { radiance: Rgb::WHITE, positions: positions.into(), indices: indices.into() };
+    area_light(emitter, Trs::default())
+}
+
+#[test]
+fn a_parallelogram_mesh_light_is_sampled_uniformly_over_its_edges() {
+    // A sheared parallelogram (0,0), (2,0), (3,1), (1,1), split along (2,0)–(1,1) and listed
+    // from that diagonal, so the corner and edges are not the vertices' first three.
+    let light = mesh_light([[0.0, 0.0], [2.0, 0.0], [3.0, 1.0], [1.0, 1.0]], [[1, 3, 2], [1, 0, 3]]);
+    assert!(matches!(light, LightGeometry::Area { parallelogram: Some(_), .. }), "not seen as a parallelogram");
+    let mut rng = Rng::new(4, 1);
+    let mut observed = vec![0u64; COS_BINS * PHI_BINS];
+    for _ in 0..SAMPLES {
+        let s = light.sample_incident(Vec3::ZERO, rng.next_2d()).expect("the light faces the origin");
+        let q = s.wi * s.dist;
+        // q = (0,0) + a·(2,0) + b·(1,1): b = y, a = (x − y) / 2; both must be in [0, 1].
+        let (a, b) = ((q.x - q.y) / 2.0, q.y);
+        assert!((-1e-5..=1.0 + 1e-5).contains(&a) && (-1e-5..=1.0 + 1e-5).contains(&b), "off the light: {q}");
+        let bin = ((b * COS_BINS as f32) as usize).min(COS_BINS - 1) * PHI_BINS
+            + ((a * PHI_BINS as f32) as usize).min(PHI_BINS - 1);
+        observed[bin] += 1;
+    }
+    let expected = vec![1.0 / (COS_BINS * PHI_BINS) as f64; COS_BINS * PHI_BINS];
+    let p = chi2_p_value(&observed, &expected, SAMPLES);
+    assert!(p > SIGNIFICANCE, "p = {p}");
+    // Two triangles that are not one parallelogram (a trapezoid, and two facing opposite ways)
+    // keep the choice of triangle by area.
+    let trapezoid = mesh_light([[0.0, 0.0], [2.0, 0.0], [3.5, 1.0], [1.0, 1.0]], [[1, 3, 2], [1, 0, 3]]);
+    let folded = mesh_light([[0.0, 0.0], [2.0, 0.0], [3.0, 1.0], [1.0, 1.0]], [[1, 3, 2], [1, 3, 0]]);
+    for light in [trapezoid, folded] {
+        assert!(matches!(light, LightGeometry::Area { parallelogram: None, .. }), "{light:?}");
+    }
 }
 
 /// Mean and standard error of `f(sample)` over light samples seen from the origin.
