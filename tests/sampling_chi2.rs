@@ -132,24 +132,32 @@ fn overhead(emitter: EmitterDesc, h: f32, sx: f32, sy: f32) -> LightGeometry {
     area_light(emitter, t)
 }
 
-#[test]
-fn rect_light_points_are_uniform_by_area() {
-    // Sampled points, mapped back to the rect's [0,1]² parameters, must fill a 10×20 grid evenly.
-    let light = overhead(EmitterDesc::Rect { radiance: Rgb::WHITE }, 1.0, 1.0, 0.5);
-    assert!(matches!(light, LightGeometry::Area { parallelogram: Some(_), .. }), "not sampled over its edges");
-    let mut rng = Rng::new(3, 9);
+/// χ² p-value of a light's sampled points (seen from the origin), mapped by `to_unit` back to
+/// its [0,1]² parameters, against an even fill of a 10×20 grid; a point off the light (outside
+/// [0,1]² by more than rounding) fails at once.
+fn unit_square_p_value(light: &LightGeometry, seed: u64, to_unit: impl Fn(Vec3) -> (f32, f32)) -> f64 {
+    let mut rng = Rng::new(seed, 9);
     let mut observed = vec![0u64; COS_BINS * PHI_BINS];
+    let inside = |t: f32| (-1e-5..=1.0 + 1e-5).contains(&t);
     for _ in 0..SAMPLES {
         let s = light.sample_incident(Vec3::ZERO, rng.next_2d()).expect("the light faces the origin");
         let q = s.wi * s.dist;
-        // Rect spans x ∈ [-1, 1], y ∈ [-0.5, 0.5] (rotated by π about X, y flips sign).
-        let (u, v) = ((q.x + 1.0) / 2.0, (-q.y + 0.5) / 1.0);
+        let (u, v) = to_unit(q);
+        assert!(inside(u) && inside(v), "off the light: {q}");
         let bin = ((v * COS_BINS as f32) as usize).min(COS_BINS - 1) * PHI_BINS
             + ((u * PHI_BINS as f32) as usize).min(PHI_BINS - 1);
         observed[bin] += 1;
     }
     let expected = vec![1.0 / (COS_BINS * PHI_BINS) as f64; COS_BINS * PHI_BINS];
-    let p = chi2_p_value(&observed, &expected, SAMPLES);
+    chi2_p_value(&observed, &expected, SAMPLES)
+}
+
+#[test]
+fn rect_light_points_are_uniform_by_area() {
+    let light = overhead(EmitterDesc::Rect { radiance: Rgb::WHITE }, 1.0, 1.0, 0.5);
+    assert!(matches!(light, LightGeometry::Area { parallelogram: Some(_), .. }), "not sampled over its edges");
+    // Rect spans x ∈ [-1, 1], y ∈ [-0.5, 0.5] (rotated by π about X, y flips sign).
+    let p = unit_square_p_value(&light, 3, |q| ((q.x + 1.0) / 2.0, (-q.y + 0.5) / 1.0));
     assert!(p > SIGNIFICANCE, "p = {p}");
 }
 
@@ -166,20 +174,8 @@ fn a_parallelogram_mesh_light_is_sampled_uniformly_over_its_edges() {
     // from that diagonal, so the corner and edges are not the vertices' first three.
     let light = mesh_light([[0.0, 0.0], [2.0, 0.0], [3.0, 1.0], [1.0, 1.0]], [[1, 3, 2], [1, 0, 3]]);
     assert!(matches!(light, LightGeometry::Area { parallelogram: Some(_), .. }), "not seen as a parallelogram");
-    let mut rng = Rng::new(4, 1);
-    let mut observed = vec![0u64; COS_BINS * PHI_BINS];
-    for _ in 0..SAMPLES {
-        let s = light.sample_incident(Vec3::ZERO, rng.next_2d()).expect("the light faces the origin");
-        let q = s.wi * s.dist;
-        // q = (0,0) + a·(2,0) + b·(1,1): b = y, a = (x − y) / 2; both must be in [0, 1].
-        let (a, b) = ((q.x - q.y) / 2.0, q.y);
-        assert!((-1e-5..=1.0 + 1e-5).contains(&a) && (-1e-5..=1.0 + 1e-5).contains(&b), "off the light: {q}");
-        let bin = ((b * COS_BINS as f32) as usize).min(COS_BINS - 1) * PHI_BINS
-            + ((a * PHI_BINS as f32) as usize).min(PHI_BINS - 1);
-        observed[bin] += 1;
-    }
-    let expected = vec![1.0 / (COS_BINS * PHI_BINS) as f64; COS_BINS * PHI_BINS];
-    let p = chi2_p_value(&observed, &expected, SAMPLES);
+    // q = (0,0) + a·(2,0) + b·(1,1): b = y, a = (x − y) / 2.
+    let p = unit_square_p_value(&light, 4, |q| ((q.x - q.y) / 2.0, q.y));
     assert!(p > SIGNIFICANCE, "p = {p}");
     // Two triangles that are not one parallelogram (a trapezoid, and two facing opposite ways)
     // keep the choice of triangle by area.
