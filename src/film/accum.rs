@@ -119,24 +119,28 @@ impl Film {
             .reduce(T::default, merge)
     }
 
-    /// Renders `spp` passes with [`Film::accumulate_chunks`]: `f(pass, first_pixel_index,
-    /// chunk)`, where `pass` counts the technique's passes since its last reset (`passes`, which
-    /// keys its sample streams and is advanced here, as is the film's own count). Returns the
-    /// merged figures of all passes.
+    /// Renders `spp` passes over the chunks of [`Film::accumulate_chunks`]: `f(pass,
+    /// first_pixel_index, chunk)`, where `pass` counts the technique's passes since its last
+    /// reset (`passes`, which keys its sample streams and is advanced here, as is the film's own
+    /// count). A chunk runs all its passes in order within one task, so there is no barrier
+    /// between passes and every pixel still sums its passes in pass order. Returns the merged
+    /// figures of all passes.
     pub fn accumulate_passes<T, F, M>(&mut self, spp: u32, passes: &mut u64, chunk_len: usize, f: F, merge: M) -> T
     where
         T: Default + Send,
         F: Fn(u64, usize, &mut [PixelAccum]) -> T + Sync + Send,
         M: Fn(T, T) -> T + Sync + Send,
     {
-        let mut total = T::default();
-        for _ in 0..spp {
-            let pass = *passes;
-            let figures = self.accumulate_chunks(chunk_len, |first, chunk| f(pass, first, chunk), &merge);
-            total = merge(total, figures);
-            *passes += 1;
-            self.passes += 1;
-        }
+        let first_pass = *passes;
+        let total = self.accumulate_chunks(
+            chunk_len,
+            |first, chunk| {
+                (first_pass..first_pass + u64::from(spp)).fold(T::default(), |t, pass| merge(t, f(pass, first, chunk)))
+            },
+            &merge,
+        );
+        *passes += u64::from(spp);
+        self.passes += spp;
         total
     }
 
