@@ -6,7 +6,7 @@
 //! uniformly by area over their (tessellated) triangles, so the sampled shape is exactly the
 //! intersectable one. An area light of two triangles forming a parallelogram (a rect light, or a
 //! mesh light such as a glTF export of one) is sampled directly over its two edges, with no
-//! choice of triangle: the same density, for 1.07–1.17× `path`'s samples/s on the Cornell box
+//! choice of triangle: the same density, for 1.01–1.17× `path`'s samples/s on the Cornell box
 //! (`docs/benchmarks.md`).
 use super::model::{EmitterDesc, LightDesc};
 use super::shapes::Mesh;
