@@ -101,18 +101,16 @@ pub fn emitter_mesh(emitter: &EmitterDesc) -> Option<Mesh> {
 
 /// The corner and two edges of the parallelogram two triangles make, when they share a
 /// diagonal, face the same way, and their far corners sum to the diagonal's ends (to 1e-5 of the
-/// longest edge, so a transformed rectangle still counts); the corner is the first triangle's
-/// vertex off the diagonal, and the edges run to the diagonal's ends in that triangle's order.
+/// longest edge, so a transformed rectangle still counts). The corner is the first triangle's
+/// vertex off the diagonal, and the edges run from it to the next two vertices of that triangle.
 fn parallelogram(triangles: &[[Vec3; 3]], normals: &[Vec3]) -> Option<[Vec3; 3]> {
     let ([first, second], [n0, n1]) = (triangles, normals) else { return None };
-    let off = |t: &[Vec3; 3], other: &[Vec3; 3]| t.iter().position(|v| !other.contains(v));
-    let (i, j) = (off(first, second)?, off(second, first)?);
-    let shared: Vec<Vec3> = first.iter().enumerate().filter(|&(k, _)| k != i).map(|(_, v)| *v).collect();
-    let ([s0, s1], corner, far) = (shared.as_slice(), first[i], second[j]) else { return None };
-    let shared_by_both = second.iter().filter(|v| shared.contains(v)).count() == 2;
-    let scale = (*s0 - corner).length().max((*s1 - corner).length());
-    let closes = (corner + far - *s0 - *s1).length() <= 1e-5 * scale;
-    (shared_by_both && closes && n0.dot(*n1) > 0.999_99).then(|| [corner, *s0 - corner, *s1 - corner])
+    let i = first.iter().position(|v| !second.contains(v))?;
+    let far = *second.iter().find(|v| !first.contains(v))?;
+    let (corner, s0, s1) = (first[i], first[(i + 1) % 3], first[(i + 2) % 3]);
+    let shares_diagonal = second.contains(&s0) && second.contains(&s1);
+    let closes = (corner + far - s0 - s1).length() <= 1e-5 * (s0 - corner).length().max((s1 - corner).length());
+    (shares_diagonal && closes && n0.dot(*n1) > 0.999_99).then(|| [corner, s0 - corner, s1 - corner])
 }
 
 /// A point uniformly distributed by area over an area light's triangles, with its unit normal:
