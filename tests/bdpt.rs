@@ -85,7 +85,7 @@ fn regeneration_changes_the_order_not_the_image_and_keeps_lanes_busier() {
     let mut scene = load("cornell-box.json");
     scene.set_resolution(32, 32);
     let run = |regeneration: bool| {
-        let c = BdptConfig { regeneration, packet_width: 16, ..bdpt(2) };
+        let c = BdptConfig { regeneration, packet_width: Some(16), ..bdpt(2) };
         render(scene.clone(), TechniqueConfig::Bdpt(c), 8, 1, 2)
     };
     let (on, off) = (run(true), run(false));

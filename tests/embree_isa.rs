@@ -57,3 +57,28 @@ fn under_every_isa_every_technique_renders() {
     let (a, b) = (mean_luminance(&device, &configs[0], 7), mean_luminance(&device, &configs[0], 8));
     assert!((a - b).abs() > AGREEMENT * a, "seeds 7 and 8 agree too well: {a} vs {b}");
 }
+
+/// Lanes per packet a render used, from its stats.
+fn packet_width(frame: &relume::engine::Frame) -> u32 {
+    match &frame.stats.detail {
+        relume::technique::TechniqueStats::Path(p) => p.packet_width,
+        relume::technique::TechniqueStats::Bdpt(b) => b.lanes.packet_width,
+        other => panic!("path or bdpt stats expected, got {other:?}"),
+    }
+}
+
+#[test]
+fn without_a_packet_width_packets_are_as_wide_as_the_devices_kernels() {
+    // The width follows the device's kernel family, not the CPU: a device capped at AVX2 on an
+    // AVX-512 machine traces 8-wide packets, where 16-wide ones run slower (`Isa::packet_lanes`).
+    // A width given explicitly is kept under every family.
+    for_each_isa(|isa, device| {
+        for spec in ["path:spp=1", "bdpt:spp=1"] {
+            let config = TechniqueConfig::from_spec(spec).expect("spec");
+            let native = packet_width(&render_on(device, cornell(), config, 3, 1, 1));
+            assert_eq!(native, isa.packet_lanes(), "{spec} under {isa}");
+            let given = TechniqueConfig::from_spec(&format!("{spec}:packet_width=1")).expect("spec");
+            assert_eq!(packet_width(&render_on(device, cornell(), given, 3, 1, 1)), 1, "{spec} under {isa}");
+        }
+    });
+}

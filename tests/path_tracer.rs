@@ -53,7 +53,7 @@ fn cornell_box_radiance_grows_with_bounces_and_converges() {
 #[test]
 fn same_seed_gives_the_same_image_with_one_and_two_threads() {
     for width in [1u32, 8, 16] {
-        let config = relume::technique::path::PathConfig { packet_width: width, ..path(2) };
+        let config = relume::technique::path::PathConfig { packet_width: Some(width), ..path(2) };
         let mut scene = load("cornell-box.json");
         scene.set_resolution(40, 30);
         let one = render(scene.clone(), TechniqueConfig::Path(config.clone()), 42, 2, 1);
@@ -70,7 +70,7 @@ fn regeneration_and_packet_widths_change_the_order_not_the_image() {
     let image = |regeneration: bool, packet_width: u32| {
         let mut scene = load("cornell-box.json");
         scene.set_resolution(24, 20);
-        let config = relume::technique::path::PathConfig { regeneration, packet_width, ..path(2) };
+        let config = relume::technique::path::PathConfig { regeneration, packet_width: Some(packet_width), ..path(2) };
         render(scene, TechniqueConfig::Path(config), 9, 1, 2).image
     };
     let reference = image(true, 16);
@@ -91,7 +91,7 @@ fn regeneration_keeps_lanes_busier() {
     let stats = |regeneration: bool| {
         let mut scene = load("cornell-box.json");
         scene.set_resolution(32, 32);
-        let config = relume::technique::path::PathConfig { regeneration, packet_width: 16, ..path(1) };
+        let config = relume::technique::path::PathConfig { regeneration, packet_width: Some(16), ..path(1) };
         match render(scene, TechniqueConfig::Path(config), 3, 1, 1).stats.detail {
             relume::technique::TechniqueStats::Path(p) => p,
             other => panic!("path stats expected, got {other:?}"),

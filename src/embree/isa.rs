@@ -34,6 +34,20 @@ impl Isa {
         }
     }
 
+    /// Lanes of the widest packet the family's kernels trace natively: 16 for AVX-512, else 8
+    /// (AVX and AVX2 trace 8-wide packets; SSE kernels trace them as two halves of 4). `path`
+    /// and `bdpt` use it when no `packet_width` is given: on the Zen 4 development VM, AVX-512
+    /// `path` rendered the Cornell box 1.05× faster in 16-wide packets than in 8-wide ones and
+    /// `bdpt` 1.07×, while capped at AVX2 16-wide packets were 0.75–0.92× as fast as 8-wide
+    /// (`docs/benchmarks.md`).
+    pub fn packet_lanes(self) -> u32 {
+        if self >= Isa::Avx512 {
+            16
+        } else {
+            8
+        }
+    }
+
     /// True if this CPU (and OS) can run the family's kernels.
     pub fn supported_by_cpu(self) -> bool {
         #[cfg(target_arch = "x86_64")]

@@ -246,8 +246,10 @@ fn lane_rate(scene: &Scene, config: TechniqueConfig, device: &Device, seconds: f
 /// `technique` with `width` lanes and regeneration on or off, other parameters at defaults.
 fn lane_config(technique: &str, width: u32, regeneration: bool) -> TechniqueConfig {
     match technique {
-        "bdpt" => TechniqueConfig::Bdpt(BdptConfig { packet_width: width, regeneration, ..BdptConfig::default() }),
-        _ => TechniqueConfig::Path(PathConfig { packet_width: width, regeneration, ..PathConfig::default() }),
+        "bdpt" => {
+            TechniqueConfig::Bdpt(BdptConfig { packet_width: Some(width), regeneration, ..BdptConfig::default() })
+        }
+        _ => TechniqueConfig::Path(PathConfig { packet_width: Some(width), regeneration, ..PathConfig::default() }),
     }
 }
 

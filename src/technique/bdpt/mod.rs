@@ -38,7 +38,7 @@
 //! | `spp` | 1 | eye paths per pixel per tick |
 //! | `regeneration` | true | refill ended lanes during the regeneration phase |
 //! | `regeneration_steps` | 100 | T_r; sets the queue length |
-//! | `packet_width` | 8 | lanes per packet: 1, 8 or 16 |
+//! | `packet_width` | native | lanes per packet: 1, 8 or 16; none: 16 with Embree's AVX-512 kernels, else 8 |
 //! | `admitted_truncation` | 0.01 | c of l_m = ⌈log_{ρ_S} c⌉ |
 //! | `max_path_length` | none | overrides l_m (surface vertices of a full path) |
 //! | `light_batch` | 32 | light subpaths traced per packet queue |
@@ -93,7 +93,8 @@ pub struct BdptConfig {
     pub spp: u32,
     pub regeneration: bool,
     pub regeneration_steps: u32,
-    pub packet_width: u32,
+    /// Lanes per packet; `None`: the widest packet Embree's kernels trace natively.
+    pub packet_width: Option<u32>,
     pub admitted_truncation: f32,
     pub max_path_length: Option<u32>,
     pub light_batch: u32,
@@ -200,7 +201,7 @@ impl Technique for Bdpt {
 
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
         let LanePlan { max_path_length: l_m, mean_reflectance: rho, settings, queue } =
-            self.config.eye_settings().lane_plan(ctx.scene);
+            self.config.eye_settings().lane_plan(ctx.scene, ctx.accel.scene().device().isa());
         let pixels = film.width as usize * film.height as usize;
         let one_per_pixel = self.config.light_per_eye_path || self.config.light_tracing_only;
         let queues = pixels.div_ceil(queue as usize);
@@ -229,6 +230,7 @@ impl Technique for Bdpt {
         }
         total.lanes.max_path_length = l_m;
         total.lanes.queue_pixels = queue;
+        total.lanes.packet_width = settings.lanes as u32;
         total.lanes.mean_reflectance = rho;
         total.memory.set("splats", film.splat_bytes());
         let mut rays = total.lanes.rays;

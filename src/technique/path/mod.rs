@@ -35,7 +35,7 @@
 //! | `spp` | 1 | paths per pixel per tick |
 //! | `regeneration` | true | refill ended lanes during the regeneration phase |
 //! | `regeneration_steps` | 100 | T_r, the regeneration phase in steps (the paper's value); sets the queue length |
-//! | `packet_width` | 8 | lanes per packet: 1 (single rays), 8 or 16; camera rays go 16 to a packet |
+//! | `packet_width` | native | lanes per packet: 1 (single rays), 8 or 16; none: 16 where Embree runs its AVX-512 kernels, else 8 (measured: `Isa::packet_lanes`); camera rays go 16 to a packet |
 //! | `admitted_truncation` | 0.01 | c, the fraction of paths l_m may cut short |
 //! | `max_path_length` | none | overrides l_m (1 = direct light only) |
 //! | `preview_filter` | none | edge-preserving bilateral filter on the output (biased; previews) |
@@ -58,6 +58,7 @@ pub use length::{max_path_length, MAX_PATH_LENGTH, MIN_PATH_LENGTH};
 
 use super::registry::{Parameter, ParameterKind, TechniqueDescription, SPP};
 use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
+use crate::embree::Isa;
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
 use crate::scene::Scene;
@@ -72,7 +73,8 @@ pub struct PathConfig {
     pub spp: u32,
     pub regeneration: bool,
     pub regeneration_steps: u32,
-    pub packet_width: u32,
+    /// Lanes per packet; `None`: the widest packet Embree's kernels trace natively.
+    pub packet_width: Option<u32>,
     pub admitted_truncation: f32,
     pub max_path_length: Option<u32>,
     pub preview_filter: Option<PreviewFilter>,
@@ -84,7 +86,7 @@ impl Default for PathConfig {
             spp: 1,
             regeneration: true,
             regeneration_steps: 100,
-            packet_width: 8,
+            packet_width: None,
             admitted_truncation: 0.01,
             max_path_length: None,
             preview_filter: None,
@@ -127,6 +129,9 @@ pub struct PathStats {
     pub max_path_length: u32,
     /// Pixels in each packet's queue (from T_r and ρ_S).
     pub queue_pixels: u32,
+    /// Lanes per packet: `packet_width`, or the width Embree's kernels trace natively.
+    #[serde(default)]
+    pub packet_width: u32,
     /// ρ_S used for l_m.
     pub mean_reflectance: f32,
     /// Nothing: a path tracer keeps no light transport between ticks.
@@ -170,8 +175,8 @@ impl PathConfig {
         if self.spp == 0 || self.spp > MAX_SPP {
             return Err(invalid("spp", &format!("must lie in 1..={MAX_SPP}")));
         }
-        if ![1, 8, 16].contains(&self.packet_width) {
-            return Err(invalid("packet_width", "must be 1, 8 or 16"));
+        if self.packet_width.is_some_and(|w| ![1, 8, 16].contains(&w)) {
+            return Err(invalid("packet_width", "must be 1, 8 or 16 (or null: the CPU's native width)"));
         }
         if self.regeneration_steps == 0 || self.regeneration_steps > 4096 {
             return Err(invalid("regeneration_steps", "must lie in 1..=4096"));
@@ -226,14 +231,16 @@ pub(crate) struct LanePlan {
 }
 
 impl PathConfig {
-    /// The lane plan for `scene` under this configuration.
-    pub(crate) fn lane_plan(&self, scene: &Scene) -> LanePlan {
+    /// The lane plan for `scene` under this configuration, with packets as wide as
+    /// `packet_width` or else as `isa`'s kernels trace natively.
+    pub(crate) fn lane_plan(&self, scene: &Scene, isa: Isa) -> LanePlan {
         let rho = scene.mean_reflectance();
+        let lanes = self.packet_width.unwrap_or(isa.packet_lanes());
         LanePlan {
             max_path_length: self.max_path_length.unwrap_or_else(|| max_path_length(rho, self.admitted_truncation)),
             mean_reflectance: rho,
-            settings: LaneSettings { lanes: self.packet_width as usize, regeneration: self.regeneration },
-            queue: queue_pixels(self.packet_width, self.regeneration_steps, rho),
+            settings: LaneSettings { lanes: lanes as usize, regeneration: self.regeneration },
+            queue: queue_pixels(lanes, self.regeneration_steps, rho),
         }
     }
 }
@@ -252,7 +259,7 @@ impl Technique for PathTracer {
 
     fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
         let LanePlan { max_path_length: l_m, mean_reflectance: rho, settings, queue } =
-            self.config.lane_plan(ctx.scene);
+            self.config.lane_plan(ctx.scene, ctx.accel.scene().device().isa());
         let lane_context = PathContext { scene: ctx.scene, accel: ctx.accel, max_path_length: l_m };
         let mut total = film.accumulate_passes(
             self.config.spp,
@@ -273,6 +280,7 @@ impl Technique for PathTracer {
         );
         total.max_path_length = l_m;
         total.queue_pixels = queue;
+        total.packet_width = settings.lanes as u32;
         total.mean_reflectance = rho;
         Ok(RenderStats { rays: total.rays, detail: TechniqueStats::Path(total) })
     }
