@@ -58,6 +58,46 @@ fn assert_exact(label: &str, s: &InstantCacheStats) {
     assert_eq!(s.audit_mismatched, 0, "{label}: records differ from a fresh computation: {s:?}");
     assert_eq!(s.audit_off_surface, 0, "{label}: records left off every surface: {s:?}");
     assert_eq!(s.audit_samples_mismatched, 0, "{label}: samples kept records a lookup would not find: {s:?}");
+    assert_eq!(s.audit_cameras_mismatched, 0, "{label}: kept camera samples differ from a fresh trace: {s:?}");
+}
+
+#[test]
+fn camera_samples_are_traced_again_only_where_a_change_can_reach_them() {
+    // Property: a shifted slab makes only the camera rays that meet it (where it was, or where
+    // it is) be traced again, and every kept sample equals a fresh trace (`assert_exact`); a
+    // camera or material edit traces them all. Negative controls, by hand: keeping samples
+    // whose ray the slab now crosses, or whose hit was on it, fails `assert_exact`.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    let pixels = 24 * 24;
+    pool.install(|| {
+        let mut s = Session::new(room(HOVERING), &temporal(Reevaluation::Immediate), 5, &device).expect("session");
+        let first = stats(&s.tick().unwrap());
+        assert_eq!((first.camera_rays, first.camera_samples_kept), (pixels, 0), "{first:?}");
+        let still = stats(&s.tick().unwrap());
+        assert_eq!((still.camera_rays, still.camera_samples_kept), (0, pixels), "{still:?}");
+        for (k, x) in [0.05f32, 0.3, -0.2].into_iter().enumerate() {
+            s.queue_edits(vec![move_slab([x, HOVERING[1], HOVERING[2]])]).unwrap();
+            let moved = stats(&s.tick().unwrap());
+            let label = format!("shift {k}");
+            assert_exact(&label, &moved);
+            assert_eq!(moved.camera_rays + moved.camera_samples_kept, pixels, "{label}: {moved:?}");
+            assert!(moved.camera_rays > 0 && moved.camera_rays < pixels / 2, "{label}: {moved:?}");
+        }
+        let edits = [
+            camera_dolly(),
+            Edit::Material {
+                name: "red".into(),
+                material: serde_json::from_value(json!({"type": "diffuse", "reflectance": [0.2, 0.7, 0.1]}))
+                    .expect("material"),
+            },
+        ];
+        for edit in edits {
+            s.queue_edits(vec![edit]).unwrap();
+            let changed = stats(&s.tick().unwrap());
+            assert_eq!((changed.camera_rays, changed.camera_samples_kept), (pixels, 0), "{changed:?}");
+        }
+    });
 }
 
 #[test]

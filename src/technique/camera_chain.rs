@@ -12,7 +12,7 @@ use glam::{Vec2, Vec3};
 pub const MAX_SPECULAR_CHAIN: u32 = 16;
 
 /// The first diffuse surface a camera sample reaches.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DiffuseHit {
     pub p: Vec3,
     /// Unit geometric normal.
@@ -43,7 +43,7 @@ impl DiffuseHit {
 }
 
 /// What one camera sample found.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CameraSample {
     /// Emission of lights met along the chain, weighted by its throughput.
     pub emitted: Rgb,
@@ -52,12 +52,16 @@ pub struct CameraSample {
     pub specular_rays: u64,
 }
 
+/// The camera ray through point `jitter` ∈ [0, 1)² of pixel `index` (row-major).
+pub fn camera_ray(scene: &Scene, index: usize, jitter: Vec2) -> Ray {
+    let width = scene.camera.width as usize;
+    scene.camera.ray((index % width) as f32 + jitter.x, (index / width) as f32 + jitter.y)
+}
+
 /// Traces the camera ray through point `jitter` ∈ [0, 1)² of pixel `index` (row-major) and
 /// its specular chain, which draws from `rng`.
 pub fn trace(scene: &Scene, accel: &SceneAccel, index: usize, jitter: Vec2, rng: &mut Rng) -> CameraSample {
-    let width = scene.camera.width as usize;
-    let j = jitter;
-    let mut ray = scene.camera.ray((index % width) as f32 + j.x, (index / width) as f32 + j.y);
+    let mut ray = camera_ray(scene, index, jitter);
     let mut out = CameraSample::default();
     let mut beta = Rgb::WHITE;
     for depth in 0..MAX_SPECULAR_CHAIN {

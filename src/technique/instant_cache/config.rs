@@ -100,7 +100,7 @@ impl InstantCacheConfig {
     /// Resident memory at `pixels` pixels (`budget.rs`): the VPLs and the cache records, at
     /// most one per camera sample of a tick, each holding 4 bytes per VPL and its grid entry,
     /// and the empty grid; `audit` holds a second cache while it recomputes; the caches keep
-    /// each sample's hit, result and weights. Refinement keeps a second generation's VPLs, and
+    /// each sample's hit, result and weights, and `temporal` its camera sample. Refinement keeps a second generation's VPLs, and
     /// in `temporal` its own cache and samples beside the resident ones.
     pub fn resident_estimate(&self, pixels: u64) -> Result<MemoryEstimate, TechniqueError> {
         let generations = 1 + u64::from(self.refine_ticks > 0);
@@ -114,6 +114,8 @@ impl InstantCacheConfig {
         let per_sample = super::pixels::STATE_BYTES + WEIGHTS_PER_SAMPLE * super::pixels::WEIGHT_BYTES;
         let record = size::<Record>() + 4 * vpls + super::cache::KEY_BYTES;
         let grid = if self.mode == CacheMode::Igi { 0 } else { cache_layers + u64::from(self.audit) };
+        // `temporal` keeps each sample's camera sample for the next tick (`cameras.rs`).
+        let cameras = if self.mode == CacheMode::Temporal { samples } else { 0 };
         product_sum(
             "vpls",
             &[
@@ -121,6 +123,7 @@ impl InstantCacheConfig {
                 (records, record),
                 (kept, per_sample),
                 (grid, super::grid::MAX_EMPTY_BYTES),
+                (cameras, super::cameras::SHADED_BYTES),
             ],
         )
     }
@@ -216,7 +219,11 @@ pub struct InstantCacheStats {
     /// Case 4 rays against the full scene, and the old-bounds tests that selected them.
     pub visibility_rays_deocclusion: u64,
     pub deocclusion_box_tests: u64,
+    /// Camera rays traced (`temporal` keeps the samples a change cannot have reached: `cameras.rs`).
     pub camera_rays: u64,
+    /// `temporal`: camera samples kept from last tick instead of traced.
+    #[serde(default)]
+    pub camera_samples_kept: u64,
     pub specular_rays: u64,
     pub shadow_rays: u64,
     pub vpl_ms: f64,
@@ -237,6 +244,9 @@ pub struct InstantCacheStats {
     /// hit or records changed since last tick (those that had to look up).
     pub audit_samples_mismatched: u64,
     pub audit_samples_needed: u64,
+    /// With `audit`: kept camera samples that differ from a fresh trace.
+    #[serde(default)]
+    pub audit_cameras_mismatched: u64,
     /// A hash of the audited records (positions, normals, contributions): equal caches, equal
     /// digests.
     pub audit_digest: u64,

@@ -9,8 +9,11 @@
 //!    every diffuse hit; paths end by Russian roulette only, so no light is cut off with
 //!    their length (before, a 10-bounce cap lost ρ_S¹⁰ of it: 11% at ρ_S = 0.8); unchanged
 //!    scenes give the same VPLs.
-//! 2. Per camera sample (`technique/camera_chain.rs`): follow mirrors and glass to the first
-//!    diffuse hit; direct light by next-event estimation with a shadow ray.
+//! 2. Per camera sample (`technique/camera_chain.rs`, `cameras.rs`): follow mirrors and glass
+//!    to the first diffuse hit; direct light by next-event estimation with a shadow ray.
+//!    `temporal` keeps last tick's camera sample where no edit can have changed it (no camera,
+//!    material or light edit, and no moved surface on or at the end of its ray) and traces the
+//!    rest; direct light is sampled every tick.
 //! 3. Indirect diffuse light, by mode:
 //!    - `igi` (`igi.rs`): each pixel gathers its n×n-interleaved subset of the VPLs with
 //!      visibility rays, then a discontinuity buffer averages the n×n neighbourhood.
@@ -84,6 +87,7 @@
 //! a `static` tick, and its cache and samples double the cache's memory while the view is
 //! still.
 mod cache;
+mod cameras;
 mod config;
 pub use config::DESCRIPTION;
 mod grid;
@@ -98,19 +102,21 @@ pub use config::{
     MAX_VPLS,
 };
 
-use super::camera_chain::{self, CameraSample, DiffuseHit};
+use super::camera_chain::DiffuseHit;
 use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
-use crate::core::{Rgb, Rng};
+use crate::core::Rgb;
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
 use crate::scene::Scene;
 use cache::Cache;
+use cameras::{CameraChange, Shaded};
 use glam::Vec3;
 use pixels::SampleState;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
+use std::sync::Arc;
 use std::time::Instant;
-use temporal::{Refresh, TickChanges};
+use temporal::{Moved, Refresh, TickChanges};
 use vpl::Vpl;
 
 /// The scene's extent, fixed at the first tick so that record weights and the clamp distance
@@ -142,6 +148,10 @@ pub struct InstantCache {
     samples: Vec<Vec<SampleState>>,
     /// What this tick renders: the resident generation, a refinement, or nothing.
     kind: TickKind,
+    /// `temporal`: each pass's camera samples from the last resident tick, and what may have
+    /// changed them since (`cameras.rs`).
+    cameras: Vec<Vec<Shaded>>,
+    camera_change: CameraChange,
     /// Refinement generations rendered since the last change.
     generation: u32,
     /// The refinement generation's VPLs, and in `temporal` its cache and samples: swapped with
@@ -168,13 +178,6 @@ struct Layer {
     samples: Vec<Vec<SampleState>>,
 }
 
-/// A pixel's camera sample with its direct light.
-struct Shaded {
-    sample: CameraSample,
-    direct: Rgb,
-    shadow: bool,
-}
-
 impl InstantCache {
     pub fn new(config: InstantCacheConfig, _scene: &Scene) -> Result<InstantCache, TechniqueError> {
         config.validate()?;
@@ -190,6 +193,8 @@ impl InstantCache {
             still: false,
             samples: Vec::new(),
             kind: TickKind::Resident,
+            cameras: Vec::new(),
+            camera_change: CameraChange::All,
             generation: 0,
             refinement: Layer::default(),
         })
@@ -254,23 +259,15 @@ impl InstantCache {
 
     /// `temporal`, at the start of a tick: ages the cache and applies what changed since the
     /// VPLs `old_vpls` (cases 1–5), at once or by flagging records for on-demand re-evaluation.
-    fn invalidate(
-        &mut self,
-        ctx: &RenderContext,
-        delta: &SceneDelta,
-        old_vpls: Vec<Vpl>,
-    ) -> Result<(), TechniqueError> {
+    fn invalidate(&mut self, ctx: &RenderContext, moved: &Arc<Moved>, old_vpls: Vec<Vpl>) {
         let min_distance = self.min_distance(ctx);
-        let diagonal = self.extent(ctx).diagonal;
-        let Some(cache) = self.cache.as_mut() else { return Ok(()) };
+        let Some(cache) = self.cache.as_mut() else { return };
         let stats = &mut self.pending;
         stats.records_dropped_stale = cache.retain(|r| !r.stale);
         self.changes = None;
         let (tick, max_age) = (ctx.tick, self.config.max_age as u64);
         stats.records_aged_out = cache.retain(|r| tick.saturating_sub(r.last_used) <= max_age);
-        let Some(changes) = TickChanges::new(ctx.scene, ctx.accel, delta, old_vpls, &self.vpls, diagonal)? else {
-            return Ok(());
-        };
+        let Some(changes) = TickChanges::new(moved, old_vpls, &self.vpls) else { return };
         stats.vpls_reused = changes.vpls.reused;
         stats.vpls_reweighted = changes.vpls.reweighted;
         stats.vpls_invalidated = changes.vpls.invalidated;
@@ -287,7 +284,6 @@ impl InstantCache {
                 self.changes = Some(changes);
             }
         }
-        Ok(())
     }
 
     /// Indirect irradiance per pixel from the cache (`pixels.rs`): samples keep or look up
@@ -373,36 +369,27 @@ impl InstantCache {
         self.pending.audit_digest = audit.digest;
     }
 
-    /// Pass `pass_in_tick`'s camera samples with their direct light.
-    fn shade(&self, ctx: &RenderContext, pass_in_tick: u64) -> Vec<Shaded> {
-        let (scene, pass) = (ctx.scene, self.passes);
-        let pixels = (scene.camera.width * scene.camera.height) as usize;
-        (0..pixels)
-            .into_par_iter()
-            .map(|i| {
-                let mut rng = Rng::for_sample(ctx.seed, ctx.tick, i as u64, pass);
-                let jitter = match self.mode() {
-                    // The same sub-pixel points every tick, so a still view finds its records.
-                    CacheMode::Temporal => Rng::for_sample(ctx.seed, 0, i as u64, pass_in_tick).next_2d(),
-                    CacheMode::Igi | CacheMode::Static => rng.next_2d(),
-                };
-                let sample = camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng);
-                let (direct, shadow) = match &sample.hit {
-                    Some(hit) => camera_chain::direct_light(scene, ctx.accel, hit, &mut rng),
-                    None => (Rgb::BLACK, false),
-                };
-                Shaded { sample, direct, shadow }
-            })
-            .collect()
-    }
-
     /// Renders this tick's `spp` passes into `film` with the VPLs, cache and samples in place.
     fn render_passes(&mut self, ctx: &RenderContext, film: &mut Film) {
         let scene = ctx.scene;
         // Taken once: every pass's kept lists date from the last tick's passes.
         let renumbering = self.cache.as_mut().and_then(Cache::take_renumbering);
         for pass_in_tick in 0..self.config.spp as usize {
-            let shaded = self.shade(ctx, pass_in_tick as u64);
+            let mode = self.mode();
+            // Only `temporal`'s resident generation keeps its samples for the next tick.
+            let resident = mode == CacheMode::Temporal && self.kind == TickKind::Resident;
+            let mut shaded = match self.cameras.get_mut(pass_in_tick).filter(|_| resident) {
+                Some(kept) => std::mem::take(kept),
+                None => Vec::new(),
+            };
+            let moved = match &self.camera_change {
+                CameraChange::Moved(moved) if resident => Some(moved.as_ref()),
+                _ => None,
+            };
+            let stream = (self.passes, pass_in_tick as u64);
+            let counts = cameras::shade(ctx, mode, stream, &mut shaded, moved, self.config.audit);
+            self.pending.camera_samples_kept += counts.kept;
+            self.pending.audit_cameras_mismatched += counts.mismatched;
             let t = Instant::now();
             let indirect = match self.mode() {
                 CacheMode::Igi => {
@@ -431,7 +418,7 @@ impl InstantCache {
                     s.sample.emitted + s.direct + reflected
                 })
                 .collect();
-            self.pending.camera_rays += shaded.len() as u64;
+            self.pending.camera_rays += shaded.len() as u64 - counts.kept;
             self.pending.specular_rays += shaded.iter().map(|s| s.sample.specular_rays).sum::<u64>();
             self.pending.shadow_rays += shaded.iter().filter(|s| s.shadow).count() as u64;
             film.accumulate_chunks(
@@ -444,9 +431,15 @@ impl InstantCache {
                 },
                 |(), ()| (),
             );
+            if resident {
+                self.cameras.resize_with(self.config.spp as usize, Vec::new);
+                self.cameras[pass_in_tick] = shaded;
+            }
             self.passes += 1;
             film.passes += 1;
         }
+        let bytes = self.cameras.iter().map(|c| c.capacity() * size_of::<Shaded>()).sum::<usize>();
+        self.pending.memory.set("cameras", bytes as u64);
     }
 }
 
@@ -544,7 +537,10 @@ impl Technique for InstantCache {
         self.pending.vpl_ms = t.elapsed().as_secs_f64() * 1e3;
         if self.config.mode == CacheMode::Temporal {
             let t = Instant::now();
-            self.invalidate(ctx, delta, old_vpls)?;
+            let moved = Arc::new(Moved::new(ctx.scene, ctx.accel, delta, self.extent(ctx).diagonal)?);
+            self.invalidate(ctx, &moved, old_vpls);
+            let camera_change = delta.camera || !delta.materials.is_empty() || !delta.lights.is_empty();
+            self.camera_change = if camera_change { CameraChange::All } else { CameraChange::Moved(moved) };
             // The resident records stay in use while still ticks render other generations.
             if let (TickKind::Refine | TickKind::Idle, Some(cache)) = (self.kind, self.cache.as_mut()) {
                 mark_used(cache, None, cache.records.len(), ctx.tick);

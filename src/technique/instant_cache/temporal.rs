@@ -43,6 +43,7 @@ use crate::scene::edits::{Aabb, MovedSurface, SceneDelta};
 use crate::scene::{Scene, SceneAccel, SurfaceId};
 use crate::technique::box_tree::{widened, BoxTree, SphereCone, BOX_SLACK};
 use glam::Vec3;
+use std::sync::Arc;
 
 /// A record's point, normal and ray origin, and the VPLs' clamping distance.
 #[derive(Clone, Copy)]
@@ -156,64 +157,71 @@ impl std::ops::AddAssign for Refresh {
 pub struct TickChanges {
     pub vpls: VplDiff,
     old_vpls: Vec<Vpl>,
-    /// The moved surfaces at their new placement (`None` if nothing moved).
-    moved_now: Option<CommittedScene>,
-    new_boxes: BoxTree,
-    old_boxes: BoxTree,
+    moved: Arc<Moved>,
     /// Per VPL of this tick, the moved surfaces' new and old bounds seen from its anchor: a
     /// cheap pre-test before the trees.
     new_cones: Cones,
     old_cones: Cones,
-    /// `moved_objects[object]`: the object moved this tick.
-    moved_objects: Vec<bool>,
 }
 
-impl TickChanges {
-    /// The changes between last tick's `old_vpls` and this tick's `vpls` after `delta`, or
-    /// `None` when no record can be affected.
-    pub fn new(
-        scene: &Scene,
-        accel: &SceneAccel,
-        delta: &SceneDelta,
-        old_vpls: Vec<Vpl>,
-        vpls: &[Vpl],
-        diagonal: f32,
-    ) -> Result<Option<TickChanges>, EmbreeError> {
-        let diff = VplDiff::between(&old_vpls, vpls);
-        if diff.identity && delta.moved.is_empty() {
-            return Ok(None);
-        }
+/// The surfaces a tick's edits moved, as the cache and the kept camera samples test rays
+/// against them.
+pub struct Moved {
+    /// The moved surfaces at their new placement (`None` if nothing moved).
+    pub now: Option<CommittedScene>,
+    /// Their new and old world bounds, widened by [`BOX_SLACK`] of the diagonal, in the order
+    /// of the edits and as trees.
+    new_bounds: Vec<Aabb>,
+    old_bounds: Vec<Aabb>,
+    pub new_boxes: BoxTree,
+    old_boxes: BoxTree,
+    /// `objects[object]`: the object moved this tick.
+    pub objects: Vec<bool>,
+}
+
+impl Moved {
+    pub fn new(scene: &Scene, accel: &SceneAccel, delta: &SceneDelta, diagonal: f32) -> Result<Moved, EmbreeError> {
         let slack = BOX_SLACK * diagonal;
-        let moved_now = if delta.moved.is_empty() {
+        let now = if delta.moved.is_empty() {
             None
         } else {
             let surfaces: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
             Some(accel.subset(scene, &surfaces)?)
         };
-        let mut moved_objects = vec![false; scene.objects.len()];
+        let mut objects = vec![false; scene.objects.len()];
         for m in &delta.moved {
             if let SurfaceId::Object(i) = m.surface {
-                moved_objects[i as usize] = true;
+                objects[i as usize] = true;
             }
         }
         let boxes =
             |b: fn(&MovedSurface) -> &Aabb| -> Vec<Aabb> { delta.moved.iter().map(|m| widened(b(m), slack)).collect() };
-        let (new_boxes, old_boxes) = (boxes(|m| &m.new_bounds), boxes(|m| &m.old_bounds));
-        Ok(Some(TickChanges {
+        let (new_bounds, old_bounds) = (boxes(|m| &m.new_bounds), boxes(|m| &m.old_bounds));
+        let (new_boxes, old_boxes) = (BoxTree::new(new_bounds.clone()), BoxTree::new(old_bounds.clone()));
+        Ok(Moved { now, new_bounds, old_bounds, new_boxes, old_boxes, objects })
+    }
+}
+
+impl TickChanges {
+    /// The changes between last tick's `old_vpls` and this tick's `vpls`, with the surfaces
+    /// `moved`, or `None` when no record can be affected.
+    pub fn new(moved: &Arc<Moved>, old_vpls: Vec<Vpl>, vpls: &[Vpl]) -> Option<TickChanges> {
+        let diff = VplDiff::between(&old_vpls, vpls);
+        if diff.identity && moved.now.is_none() {
+            return None;
+        }
+        Some(TickChanges {
             vpls: diff,
             old_vpls,
-            moved_now,
-            new_cones: Cones::new(vpls, &new_boxes),
-            old_cones: Cones::new(vpls, &old_boxes),
-            new_boxes: BoxTree::new(new_boxes),
-            old_boxes: BoxTree::new(old_boxes),
-            moved_objects,
-        }))
+            new_cones: Cones::new(vpls, &moved.new_bounds),
+            old_cones: Cones::new(vpls, &moved.old_bounds),
+            moved: Arc::clone(moved),
+        })
     }
 
     /// Case 5: the record lies on an object that moved.
     pub fn removes(&self, record: &Record) -> bool {
-        self.moved_objects.get(record.object as usize).copied().unwrap_or(true)
+        self.moved.objects.get(record.object as usize).copied().unwrap_or(true)
     }
 
     /// Re-evaluates what this tick invalidated in `record` (cases 1–4), leaving it as a fresh
@@ -224,7 +232,7 @@ impl TickChanges {
         let at = RecordPoint { p, n, from, min_distance };
         let mut work = Refresh::default();
         let (mut in_new, mut in_old) = (vec![false; vpls.len()], vec![false; vpls.len()]);
-        if self.moved_now.is_some() {
+        if self.moved.now.is_some() {
             self.new_cones.mark(from, &mut in_new);
             self.old_cones.mark(from, &mut in_old);
         }
@@ -314,11 +322,11 @@ impl TickChanges {
         (in_new, in_old): (bool, bool),
         work: &mut Refresh,
     ) -> bool {
-        let Some(moved_now) = &self.moved_now else { return visible_before };
+        let Some(moved_now) = &self.moved.now else { return visible_before };
         // Case 3: a moved surface now lies on the ray.
         if in_new {
             let ray = visibility_ray(from, vpl);
-            let (near_new, tests) = self.new_boxes.hits(ray.origin, ray.dir, ray.tfar);
+            let (near_new, tests) = self.moved.new_boxes.hits(ray.origin, ray.dir, ray.tfar);
             work.occlusion_box_tests += tests;
             if near_new {
                 work.occlusion_rays += 1;
@@ -335,7 +343,7 @@ impl TickChanges {
             return false;
         }
         let ray = visibility_ray(from, vpl);
-        let (near_old, tests) = self.old_boxes.hits(ray.origin, ray.dir, ray.tfar);
+        let (near_old, tests) = self.moved.old_boxes.hits(ray.origin, ray.dir, ray.tfar);
         work.deocclusion_box_tests += tests;
         if !near_old {
             return false;
