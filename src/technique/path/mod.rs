@@ -176,7 +176,7 @@ impl PathConfig {
             return Err(invalid("spp", &format!("must lie in 1..={MAX_SPP}")));
         }
         if self.packet_width.is_some_and(|w| ![1, 8, 16].contains(&w)) {
-            return Err(invalid("packet_width", "must be 1, 8 or 16 (or null: the CPU's native width)"));
+            return Err(invalid("packet_width", "must be 1, 8 or 16 (or null: the width Embree's kernels trace natively)"));
         }
         if self.regeneration_steps == 0 || self.regeneration_steps > 4096 {
             return Err(invalid("regeneration_steps", "must lie in 1..=4096"));
