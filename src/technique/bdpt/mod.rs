@@ -38,7 +38,7 @@
 //! | `spp` | 1 | eye paths per pixel per tick |
 //! | `regeneration` | true | refill ended lanes during the regeneration phase |
 //! | `regeneration_steps` | 100 | T_r; sets the queue length |
-//! | `packet_width` | native | lanes per packet: 1, 8 or 16; none: 16 with Embree's AVX-512 kernels, else 8 |
+//! | `packet_width` | native | lanes per packet: 1, 8 or 16; none: 16 with AVX-512 kernels, else 8 |
 //! | `admitted_truncation` | 0.01 | c of l_m = ⌈log_{ρ_S} c⌉ |
 //! | `max_path_length` | none | overrides l_m (surface vertices of a full path) |
 //! | `light_batch` | 32 | light subpaths traced per packet queue |

@@ -100,8 +100,9 @@ impl InstantCacheConfig {
     /// Resident memory at `pixels` pixels (`budget.rs`): the VPLs and the cache records, at
     /// most one per camera sample of a tick, each holding 4 bytes per VPL and its grid entry,
     /// and the empty grid; `audit` holds a second cache while it recomputes; the caches keep
-    /// each sample's hit, result and weights, and `temporal` its camera sample. Refinement keeps a second generation's VPLs, and
-    /// in `temporal` its own cache and samples beside the resident ones.
+    /// each sample's hit, result and weights, and `temporal` its camera sample. Refinement
+    /// keeps a second generation's VPLs, and in `temporal` its own cache and samples beside the
+    /// resident ones.
     pub fn resident_estimate(&self, pixels: u64) -> Result<MemoryEstimate, TechniqueError> {
         let generations = 1 + u64::from(self.refine_ticks > 0);
         let cache_layers = if self.mode == CacheMode::Temporal { generations } else { 1 };

@@ -35,7 +35,7 @@
 //! | `spp` | 1 | paths per pixel per tick |
 //! | `regeneration` | true | refill ended lanes during the regeneration phase |
 //! | `regeneration_steps` | 100 | T_r, the regeneration phase in steps (the paper's value); sets the queue length |
-//! | `packet_width` | native | lanes per packet: 1 (single rays), 8 or 16; none: 16 where Embree runs its AVX-512 kernels, else 8 (measured: `Isa::packet_lanes`); camera rays go 16 to a packet |
+//! | `packet_width` | native | lanes per packet: 1, 8 or 16; none: 16 with AVX-512 kernels, else 8 (`Isa::packet_lanes`) |
 //! | `admitted_truncation` | 0.01 | c, the fraction of paths l_m may cut short |
 //! | `max_path_length` | none | overrides l_m (1 = direct light only) |
 //! | `preview_filter` | none | edge-preserving bilateral filter on the output (biased; previews) |
@@ -176,7 +176,10 @@ impl PathConfig {
             return Err(invalid("spp", &format!("must lie in 1..={MAX_SPP}")));
         }
         if self.packet_width.is_some_and(|w| ![1, 8, 16].contains(&w)) {
-            return Err(invalid("packet_width", "must be 1, 8 or 16 (or null: the width Embree's kernels trace natively)"));
+            return Err(invalid(
+                "packet_width",
+                "must be 1, 8 or 16 (or null: the width Embree's kernels trace natively)",
+            ));
         }
         if self.regeneration_steps == 0 || self.regeneration_steps > 4096 {
             return Err(invalid("regeneration_steps", "must lie in 1..=4096"));
