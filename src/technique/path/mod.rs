@@ -35,7 +35,7 @@
 //! | `spp` | 1 | paths per pixel per tick |
 //! | `regeneration` | true | refill ended lanes during the regeneration phase |
 //! | `regeneration_steps` | 100 | T_r, the regeneration phase in steps (the paper's value); sets the queue length |
-//! | `packet_width` | native | lanes per packet: 1, 8 or 16; none: 16 with AVX-512 kernels, else 8 (`Isa::packet_lanes`) |
+//! | `packet_width` | native | lanes per packet: 1, 8 or 16; none: 16 with AVX-512 kernels, else 8 |
 //! | `admitted_truncation` | 0.01 | c, the fraction of paths l_m may cut short |
 //! | `max_path_length` | none | overrides l_m (1 = direct light only) |
 //! | `preview_filter` | none | edge-preserving bilateral filter on the output (biased; previews) |
