@@ -65,8 +65,9 @@ fn assert_exact(label: &str, s: &InstantCacheStats) {
 fn camera_samples_are_traced_again_only_where_a_change_can_reach_them() {
     // Property: a shifted slab makes only the camera rays that meet it (where it was, or where
     // it is) be traced again, and every kept sample equals a fresh trace (`assert_exact`); a
-    // camera or material edit traces them all. Negative controls, by hand: keeping samples
-    // whose ray the slab now crosses, or whose hit was on it, fails `assert_exact`.
+    // moved point light keeps them all; a camera or material edit traces them all. Negative
+    // controls, by hand: keeping samples whose ray the slab now crosses, or whose hit was on
+    // it, fails `assert_exact`; retracing every sample when a light moves fails the lamp's.
     let device = Device::new(2).unwrap();
     let pool = thread_pool(2).unwrap();
     let pixels = 24 * 24;
@@ -84,6 +85,11 @@ fn camera_samples_are_traced_again_only_where_a_change_can_reach_them() {
             assert_eq!(moved.camera_rays + moved.camera_samples_kept, pixels, "{label}: {moved:?}");
             assert!(moved.camera_rays > 0 && moved.camera_rays < pixels / 2, "{label}: {moved:?}");
         }
+        // The lamp, a point light, has no shape a camera ray could meet: moving it keeps them all.
+        s.queue_edits(vec![move_lamp([0.4, 1.8, 0.2])]).unwrap();
+        let lamp = stats(&s.tick().unwrap());
+        assert_exact("the lamp moves", &lamp);
+        assert_eq!((lamp.camera_rays, lamp.camera_samples_kept), (0, pixels), "the lamp moves: {lamp:?}");
         let edits = [
             camera_dolly(),
             Edit::Material {

@@ -2,14 +2,14 @@
 //! from tick to tick.
 //!
 //! `temporal` looks through the same sub-pixel point of a pixel every tick, so a camera sample
-//! traced last tick is what a fresh trace finds unless the camera, a material or a surface on
-//! its ray changed. A sample is kept when it met no emission and no mirror or glass (its ray
-//! ends at its diffuse hit, or leaves the scene), its hit is not on a moved object, and no
-//! moved surface now lies on its ray before the hit: the ray is tested against the moved
-//! surfaces' new bounds, and where it touches one, traced against those surfaces alone where
-//! they are now (`temporal::Moved`). Direct light is sampled afresh every tick either way; a
-//! kept sample drew no random number, so the sample's stream is where a fresh trace would
-//! leave it and the image is the same.
+//! traced last tick is what a fresh trace finds unless the camera, a material, an emitter or a
+//! surface on its ray changed (a moved light's shape is a moved surface). A sample is kept
+//! when it met no emission and no mirror or glass (its ray ends at its diffuse hit, or leaves
+//! the scene), its hit is not on a moved object, and no moved surface now lies on its ray
+//! before the hit: the ray is tested against the moved surfaces' new bounds, and where it
+//! touches one, traced against those surfaces alone where they are now (`temporal::Moved`).
+//! Direct light is sampled afresh every tick either way; a kept sample drew no random number,
+//! so the sample's stream is where a fresh trace would leave it and the image is the same.
 //!
 //! Invariant (audited with `audit: true`, stat `audit_cameras_mismatched`): a kept sample
 //! equals, bit for bit, a fresh trace of its camera ray.
@@ -35,7 +35,7 @@ pub const SHADED_BYTES: u64 = std::mem::size_of::<Shaded>() as u64;
 
 /// What may have changed last tick's camera samples.
 pub enum CameraChange {
-    /// Trace every sample: the camera, a material or a light changed.
+    /// Trace every sample: the camera, a material or an emitter changed.
     All,
     /// At most these surfaces moved.
     Moved(Arc<Moved>),

@@ -12,8 +12,8 @@
 //! 2. Per camera sample (`technique/camera_chain.rs`, `cameras.rs`): follow mirrors and glass
 //!    to the first diffuse hit; direct light by next-event estimation with a shadow ray.
 //!    `temporal` keeps last tick's camera sample where no edit can have changed it (no camera,
-//!    material or light edit, and no moved surface on or at the end of its ray) and traces the
-//!    rest; direct light is sampled every tick.
+//!    material or emitter edit, and no moved object or light shape on or at the end of its ray)
+//!    and traces the rest; direct light is sampled every tick.
 //! 3. Indirect diffuse light, by mode:
 //!    - `igi` (`igi.rs`): each pixel gathers its n×n-interleaved subset of the VPLs with
 //!      visibility rays, then a discontinuity buffer averages the n×n neighbourhood.
@@ -539,7 +539,9 @@ impl Technique for InstantCache {
             let t = Instant::now();
             let moved = Arc::new(Moved::new(ctx.scene, ctx.accel, delta, self.extent(ctx).diagonal)?);
             self.invalidate(ctx, &moved, old_vpls);
-            let camera_change = delta.camera || !delta.materials.is_empty() || !delta.lights.is_empty();
+            // A moved light's shape is among the moved surfaces; a changed emitter may be a new shape.
+            let emitters = delta.lights.iter().any(|l| l.emission_changed);
+            let camera_change = delta.camera || !delta.materials.is_empty() || emitters;
             self.camera_change = if camera_change { CameraChange::All } else { CameraChange::Moved(moved) };
             // The resident records stay in use while still ticks render other generations.
             if let (TickKind::Refine | TickKind::Idle, Some(cache)) = (self.kind, self.cache.as_mut()) {
