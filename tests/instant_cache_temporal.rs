@@ -107,6 +107,30 @@ fn camera_samples_are_traced_again_only_where_a_change_can_reach_them() {
 }
 
 #[test]
+fn a_light_seen_from_behind_that_moves_away_uncovers_what_it_hid() {
+    // A camera ray that meets the back of a rect light ends there with no emission and no hit,
+    // as a ray that leaves the scene does. When the light moves away, the surface it hid must
+    // be traced again (`assert_exact`); negative control, by hand: keeping such samples like
+    // misses fails it.
+    let mut json = slab_room_json([0.0, 0.3, -2.5], [0.0, 0.3, 2.0], AWAY, SLAB_SCALE, [0.0, 1.9, 0.5]);
+    let panel = json!({"name": "panel", "dynamic": true, "emitter": {"type": "rect", "radiance": [1, 1, 1]},
+                       "transform": {"translation": [0.0, 0.4, 1.0], "scale": [0.3, 0.3, 1.0]}});
+    json["lights"].as_array_mut().expect("lights").push(panel);
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    pool.install(|| {
+        let config = temporal(Reevaluation::Immediate);
+        let mut s = Session::new(scene_from_json(json), &config, 5, &device).expect("session");
+        s.tick().unwrap();
+        let to = Trs { translation: AWAY, rotation: NO_ROTATION, scale: [0.3, 0.3, 1.0] };
+        s.queue_edits(vec![Edit::Light { name: "panel".into(), transform: Some(to), emitter: None }]).unwrap();
+        let moved = stats(&s.tick().unwrap());
+        assert_exact("the panel moves away", &moved);
+        assert!(moved.camera_rays > 0, "nothing was traced again: {moved:?}");
+    });
+}
+
+#[test]
 fn every_case_of_algorithm_1_leaves_the_cache_exact() {
     // Property: after each animation, every record's per-VPL contributions and irradiance are
     // bit-identical to a record computed from scratch at its position with the tick's VPLs

@@ -5,14 +5,15 @@
 //! traced last tick is what a fresh trace finds unless the camera, a material, an emitter or a
 //! surface on its ray changed (a moved light's shape is a moved surface). A sample is kept
 //! when it met no emission and no mirror or glass (its ray ends at its diffuse hit, or leaves
-//! the scene), its hit is not on a moved object, and no moved surface now lies on its ray
+//! the scene, or meets a light's back side: a miss is kept only while no light's shape moved),
+//! its hit is not on a moved object, and no moved surface now lies on its ray
 //! before the hit: the ray is tested against the moved surfaces' new bounds, and where it
 //! touches one, traced against those surfaces alone where they are now (`temporal::Moved`).
 //! Direct light is sampled afresh every tick either way; a kept sample drew no random number,
 //! so the sample's stream is where a fresh trace would leave it and the image is the same.
 //!
 //! Invariant (audited with `audit: true`, stat `audit_cameras_mismatched`): a kept sample
-//! equals, bit for bit, a fresh trace of its camera ray.
+//! equals a fresh trace of its camera ray in every field.
 use super::temporal::Moved;
 use super::CacheMode;
 use crate::core::{Rgb, Rng};
@@ -57,6 +58,9 @@ fn still_valid(moved: &Moved, ray: &Ray, s: &CameraSample) -> bool {
     let tfar = match &s.hit {
         Some(hit) if moved.objects.get(hit.object as usize).copied().unwrap_or(true) => return false,
         Some(hit) => (hit.p - ray.origin).length() / ray.dir.length(),
+        // A ray that met a light's back side ends without emission or hit, as a miss does: if
+        // a light's shape moved, what it hid may show now.
+        None if moved.light_shapes => return false,
         None => f32::INFINITY,
     };
     let Some(now) = &moved.now else { return true };

@@ -177,6 +177,8 @@ pub struct Moved {
     old_boxes: BoxTree,
     /// `objects[object]`: the object moved this tick.
     pub objects: Vec<bool>,
+    /// A light's shape moved this tick.
+    pub light_shapes: bool,
 }
 
 impl Moved {
@@ -198,7 +200,8 @@ impl Moved {
             |b: fn(&MovedSurface) -> &Aabb| -> Vec<Aabb> { delta.moved.iter().map(|m| widened(b(m), slack)).collect() };
         let (new_bounds, old_bounds) = (boxes(|m| &m.new_bounds), boxes(|m| &m.old_bounds));
         let (new_boxes, old_boxes) = (BoxTree::new(new_bounds.clone()), BoxTree::new(old_bounds.clone()));
-        Ok(Moved { now, new_bounds, old_bounds, new_boxes, old_boxes, objects })
+        let light_shapes = delta.moved.iter().any(|m| matches!(m.surface, SurfaceId::Light(_)));
+        Ok(Moved { now, new_bounds, old_bounds, new_boxes, old_boxes, objects, light_shapes })
     }
 }
 
