@@ -36,10 +36,12 @@ impl Cells {
         (self.dims[0] * self.dims[1] * self.dims[2]) as usize
     }
 
-    /// The cell of `p`, clamped into the grid (monotone in each coordinate).
+    /// The cell of `p`, clamped into the grid (monotone in each coordinate). Clamping before
+    /// the cast makes truncation a floor (the baseline x86-64 has no rounding instruction, and
+    /// `floor` costs a libm call); NaN falls into cell 0.
     pub fn cell_of(&self, p: Vec3) -> [i32; 3] {
         let c = (p - self.lo) / self.cell;
-        let clamp = |v: f32, n: i32| (v.floor().clamp(0.0, (n - 1) as f32)) as i32;
+        let clamp = |v: f32, n: i32| v.max(0.0).min((n - 1) as f32) as i32;
         [clamp(c.x, self.dims[0]), clamp(c.y, self.dims[1]), clamp(c.z, self.dims[2])]
     }
 
