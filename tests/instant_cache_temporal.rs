@@ -58,16 +58,22 @@ fn assert_exact(label: &str, s: &InstantCacheStats) {
     assert_eq!(s.audit_mismatched, 0, "{label}: records differ from a fresh computation: {s:?}");
     assert_eq!(s.audit_off_surface, 0, "{label}: records left off every surface: {s:?}");
     assert_eq!(s.audit_samples_mismatched, 0, "{label}: samples kept records a lookup would not find: {s:?}");
-    assert_eq!(s.audit_cameras_mismatched, 0, "{label}: kept camera samples differ from a fresh trace: {s:?}");
+    assert_eq!(
+        s.audit_cameras_mismatched, 0,
+        "{label}: kept camera samples or direct light differ from a fresh trace: {s:?}"
+    );
 }
 
 #[test]
 fn camera_samples_are_traced_again_only_where_a_change_can_reach_them() {
     // Property: a shifted slab makes only the camera rays that meet it (where it was, or where
     // it is) be traced again, and every kept sample equals a fresh trace (`assert_exact`); a
-    // moved point light keeps them all; a camera or material edit traces them all. Negative
-    // controls, by hand: keeping samples whose ray the slab now crosses, or whose hit was on
-    // it, fails `assert_exact`; retracing every sample when a light moves fails the lamp's.
+    // moved point light keeps them all; a camera or material edit traces them all. Direct
+    // light is kept with its sample unless its shadow ray meets the slab (where it was, or
+    // where it is), the stream changed (a still tick draws a new one) or a light changed.
+    // Negative controls, by hand: keeping samples whose ray the slab now crosses, or whose hit
+    // was on it, fails `assert_exact`; so does keeping direct light whose shadow ray only the
+    // slab's old place meets; retracing every sample when a light moves fails the lamp's.
     let device = Device::new(2).unwrap();
     let pool = thread_pool(2).unwrap();
     let pixels = 24 * 24;
@@ -75,8 +81,10 @@ fn camera_samples_are_traced_again_only_where_a_change_can_reach_them() {
         let mut s = Session::new(room(HOVERING), &temporal(Reevaluation::Immediate), 5, &device).expect("session");
         let first = stats(&s.tick().unwrap());
         assert_eq!((first.camera_rays, first.camera_samples_kept), (pixels, 0), "{first:?}");
+        assert_eq!(first.direct_samples_kept, 0, "{first:?}");
         let still = stats(&s.tick().unwrap());
         assert_eq!((still.camera_rays, still.camera_samples_kept), (0, pixels), "{still:?}");
+        assert_eq!(still.direct_samples_kept, 0, "a still tick samples the light afresh: {still:?}");
         for (k, x) in [0.05f32, 0.3, -0.2].into_iter().enumerate() {
             s.queue_edits(vec![move_slab([x, HOVERING[1], HOVERING[2]])]).unwrap();
             let moved = stats(&s.tick().unwrap());
@@ -84,12 +92,19 @@ fn camera_samples_are_traced_again_only_where_a_change_can_reach_them() {
             assert_exact(&label, &moved);
             assert_eq!(moved.camera_rays + moved.camera_samples_kept, pixels, "{label}: {moved:?}");
             assert!(moved.camera_rays > 0 && moved.camera_rays < pixels / 2, "{label}: {moved:?}");
+            // The first shift follows the still tick's stream; later ones follow a shift's.
+            let direct = moved.direct_samples_kept;
+            match k {
+                0 => assert_eq!(direct, 0, "{label}: {moved:?}"),
+                _ => assert!(direct > 0 && direct < moved.camera_samples_kept, "{label}: {moved:?}"),
+            }
         }
         // The lamp, a point light, has no shape a camera ray could meet: moving it keeps them all.
         s.queue_edits(vec![move_lamp([0.4, 1.8, 0.2])]).unwrap();
         let lamp = stats(&s.tick().unwrap());
         assert_exact("the lamp moves", &lamp);
         assert_eq!((lamp.camera_rays, lamp.camera_samples_kept), (0, pixels), "the lamp moves: {lamp:?}");
+        assert_eq!(lamp.direct_samples_kept, 0, "the lamp moves: {lamp:?}");
         let edits = [
             camera_dolly(),
             Edit::Material {
@@ -102,6 +117,7 @@ fn camera_samples_are_traced_again_only_where_a_change_can_reach_them() {
             s.queue_edits(vec![edit]).unwrap();
             let changed = stats(&s.tick().unwrap());
             assert_eq!((changed.camera_rays, changed.camera_samples_kept), (pixels, 0), "{changed:?}");
+            assert_eq!(changed.direct_samples_kept, 0, "{changed:?}");
         }
     });
 }

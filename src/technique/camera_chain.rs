@@ -93,12 +93,13 @@ pub fn trace(scene: &Scene, accel: &SceneAccel, index: usize, jitter: Vec2, rng:
 }
 
 /// Direct light at a diffuse hit by next-event estimation (one light by power, one shadow
-/// ray), times the chain's throughput. Returns the radiance and whether a shadow ray was traced.
-pub fn direct_light(scene: &Scene, accel: &SceneAccel, hit: &DiffuseHit, rng: &mut Rng) -> (Rgb, bool) {
+/// ray), times the chain's throughput. Returns the radiance and the shadow ray, if one was
+/// traced.
+pub fn direct_light(scene: &Scene, accel: &SceneAccel, hit: &DiffuseHit, rng: &mut Rng) -> (Rgb, Option<Ray>) {
     let material = hit.material(scene);
     match sample_next_event(scene, material, hit.p, hit.n, hit.wo, rng, false) {
-        Some(ne) if !accel.scene().occluded1(&ne.shadow) => (hit.beta * ne.contribution, true),
-        Some(_) => (Rgb::BLACK, true),
-        None => (Rgb::BLACK, false),
+        Some(ne) if !accel.scene().occluded1(&ne.shadow) => (hit.beta * ne.contribution, Some(ne.shadow)),
+        Some(ne) => (Rgb::BLACK, Some(ne.shadow)),
+        None => (Rgb::BLACK, None),
     }
 }

@@ -9,11 +9,21 @@
 //! its hit is not on a moved object, and no moved surface now lies on its ray
 //! before the hit: the ray is tested against the moved surfaces' new bounds, and where it
 //! touches one, traced against those surfaces alone where they are now (`temporal::Moved`).
-//! Direct light is sampled afresh every tick either way; a kept sample drew no random number,
-//! so the sample's stream is where a fresh trace would leave it and the image is the same.
+//!
+//! Direct light is kept too, when a fresh sample would draw the same: `temporal`'s resident
+//! passes draw from a stream of the pixel and the pass since the last change (not of the tick),
+//! so the k-th pass of every changing tick draws alike, and a kept camera sample drew no random
+//! number (so direct light starts where a fresh trace would leave the stream). A kept sample
+//! keeps its direct light when its pass drew from the same stream last tick, no light changed
+//! (light selection, sampling and emission are as before), and its shadow ray, if it traced
+//! one, touches neither the new nor the old bounds of a moved surface (its answer can change
+//! only if a moved surface lies on it now or lay on it before). Otherwise the light is sampled
+//! again: still ticks with `refine_ticks: 0` draw a new stream each pass, so a still view
+//! converges.
 //!
 //! Invariant (audited with `audit: true`, stat `audit_cameras_mismatched`): a kept sample
-//! equals a fresh trace of its camera ray in every field.
+//! equals a fresh trace of its camera ray in every field, and kept direct light equals a
+//! fresh sample of it, shadow ray included.
 use super::temporal::Moved;
 use super::CacheMode;
 use crate::core::{Rgb, Rng};
@@ -28,7 +38,8 @@ use std::sync::Arc;
 pub struct Shaded {
     pub sample: CameraSample,
     pub direct: Rgb,
-    pub shadow: bool,
+    /// The shadow ray its direct light traced, if it traced one.
+    pub shadow: Option<Ray>,
 }
 
 /// Bytes a kept camera sample holds.
@@ -38,16 +49,41 @@ pub const SHADED_BYTES: u64 = std::mem::size_of::<Shaded>() as u64;
 pub enum CameraChange {
     /// Trace every sample: the camera, a material or an emitter changed.
     All,
-    /// At most these surfaces moved.
-    Moved(Arc<Moved>),
+    /// At most these surfaces moved; `lights`: a light changed too (its direct light is sampled
+    /// again).
+    Moved { moved: Arc<Moved>, lights: bool },
 }
 
 /// How a pass's camera samples were made.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct CameraCounts {
     pub kept: u64,
-    /// Kept samples a fresh trace disagrees with (`audit` only).
+    /// Samples that kept their direct light, and shadow rays traced.
+    pub direct_kept: u64,
+    pub shadow_rays: u64,
+    /// Kept samples or direct light a fresh trace disagrees with (`audit` only).
     pub mismatched: u64,
+}
+
+impl std::ops::Add for CameraCounts {
+    type Output = CameraCounts;
+    fn add(self, o: CameraCounts) -> CameraCounts {
+        CameraCounts {
+            kept: self.kept + o.kept,
+            direct_kept: self.direct_kept + o.direct_kept,
+            shadow_rays: self.shadow_rays + o.shadow_rays,
+            mismatched: self.mismatched + o.mismatched,
+        }
+    }
+}
+
+/// What a pass may keep of last tick's samples of the same pass.
+#[derive(Clone, Copy)]
+pub struct Reuse<'a> {
+    /// The surfaces moved since (`temporal::Moved`).
+    pub moved: &'a Moved,
+    /// Direct light may be kept: the same stream as last tick, and no light changed.
+    pub direct: bool,
 }
 
 /// Is the kept sample `s` of `ray` still what a fresh trace finds after `moved`?
@@ -67,43 +103,70 @@ fn still_valid(moved: &Moved, ray: &Ray, s: &CameraSample) -> bool {
     !moved.new_boxes.hits(ray.origin, ray.dir, tfar).0 || !now.occluded1(&Ray { tfar, ..*ray })
 }
 
-/// Pass `pass` (the `pass_in_tick`-th of its tick) of camera samples with their direct light,
-/// written over `shaded`. With `moved` (`temporal`, and `shaded` holding last tick's samples of
-/// this pass), samples still valid after it are kept rather than traced.
+/// The `tick` key of `temporal`'s resident streams, which no tick reaches: they depend on the
+/// pixel and the pass since the last change only.
+const RESIDENT_STREAM: u64 = u64::MAX;
+
+/// Pass `pass` (the `pass_in_tick`-th of its tick; passes count from the last change) of camera
+/// samples with their direct light, written over `shaded`. With `reuse` (`temporal`, and
+/// `shaded` holding last tick's samples of this pass), what is still valid is kept.
 pub fn shade(
     ctx: &RenderContext,
     mode: CacheMode,
     (pass, pass_in_tick): (u64, u64),
     shaded: &mut Vec<Shaded>,
-    moved: Option<&Moved>,
+    reuse: Option<Reuse>,
     audit: bool,
 ) -> CameraCounts {
     let scene = ctx.scene;
     let pixels = (scene.camera.width * scene.camera.height) as usize;
-    let moved = moved.filter(|_| shaded.len() == pixels);
+    let reuse = reuse.filter(|_| shaded.len() == pixels);
     shaded.resize(pixels, Shaded::default());
-    let (kept, mismatched) = shaded
+    shaded
         .par_iter_mut()
         .enumerate()
         .map(|(i, s)| {
-            let mut rng = Rng::for_sample(ctx.seed, ctx.tick, i as u64, pass);
-            let jitter = match mode {
+            let (mut rng, jitter) = match mode {
                 // The same sub-pixel points every tick, so a still view finds its records.
-                CacheMode::Temporal => Rng::for_sample(ctx.seed, 0, i as u64, pass_in_tick).next_2d(),
-                CacheMode::Igi | CacheMode::Static => rng.next_2d(),
+                CacheMode::Temporal => (
+                    Rng::for_sample(ctx.seed, RESIDENT_STREAM, i as u64, pass),
+                    Rng::for_sample(ctx.seed, 0, i as u64, pass_in_tick).next_2d(),
+                ),
+                CacheMode::Igi | CacheMode::Static => {
+                    let mut rng = Rng::for_sample(ctx.seed, ctx.tick, i as u64, pass);
+                    let jitter = rng.next_2d();
+                    (rng, jitter)
+                }
             };
-            let keep = moved.is_some_and(|m| still_valid(m, &camera_chain::camera_ray(scene, i, jitter), &s.sample));
-            let mismatched =
-                keep && audit && camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng.clone()) != s.sample;
+            let keep =
+                reuse.is_some_and(|r| still_valid(r.moved, &camera_chain::camera_ray(scene, i, jitter), &s.sample));
+            let mut counts = CameraCounts { kept: u64::from(keep), ..CameraCounts::default() };
+            if keep && audit && camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng.clone()) != s.sample {
+                counts.mismatched = 1;
+            }
             if !keep {
                 s.sample = camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng);
             }
-            (s.direct, s.shadow) = match &s.sample.hit {
-                Some(hit) => camera_chain::direct_light(scene, ctx.accel, hit, &mut rng),
-                None => (Rgb::BLACK, false),
-            };
-            (u64::from(keep), u64::from(mismatched))
+            let keep_direct =
+                keep && reuse.is_some_and(|r| r.direct && s.shadow.is_none_or(|ray| !r.moved.on_ray(&ray)));
+            if !keep_direct {
+                (s.direct, s.shadow) = direct_light(ctx, &s.sample, &mut rng);
+                counts.shadow_rays = u64::from(s.shadow.is_some());
+            } else {
+                counts.direct_kept = 1;
+                if audit && direct_light(ctx, &s.sample, &mut rng) != (s.direct, s.shadow) {
+                    counts.mismatched = 1;
+                }
+            }
+            counts
         })
-        .reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
-    CameraCounts { kept, mismatched }
+        .reduce(CameraCounts::default, |a, b| a + b)
+}
+
+/// Direct light at the sample's diffuse hit, and the shadow ray traced, if any.
+fn direct_light(ctx: &RenderContext, sample: &CameraSample, rng: &mut Rng) -> (Rgb, Option<Ray>) {
+    match &sample.hit {
+        Some(hit) => camera_chain::direct_light(ctx.scene, ctx.accel, hit, rng),
+        None => (Rgb::BLACK, None),
+    }
 }

@@ -225,6 +225,9 @@ pub struct InstantCacheStats {
     /// `temporal`: camera samples kept from last tick instead of traced.
     #[serde(default)]
     pub camera_samples_kept: u64,
+    /// `temporal`: kept camera samples that also kept their direct light (no shadow ray).
+    #[serde(default)]
+    pub direct_samples_kept: u64,
     pub specular_rays: u64,
     pub shadow_rays: u64,
     pub vpl_ms: f64,

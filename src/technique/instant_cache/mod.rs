@@ -13,7 +13,9 @@
 //!    to the first diffuse hit; direct light by next-event estimation with a shadow ray.
 //!    `temporal` keeps last tick's camera sample where no edit can have changed it (no camera,
 //!    material or emitter edit, and no moved object or light shape on or at the end of its ray)
-//!    and traces the rest; direct light is sampled every tick.
+//!    and traces the rest; a kept sample keeps its direct light too while no light changed and
+//!    no moved surface lies, or lay, on its shadow ray (resident passes draw from a stream of
+//!    the pixel and the pass since the change, so a fresh sample would draw the same).
 //! 3. Indirect diffuse light, by mode:
 //!    - `igi` (`igi.rs`): each pixel gathers its n×n-interleaved subset of the VPLs with
 //!      visibility rays, then a discontinuity buffer averages the n×n neighbourhood.
@@ -30,7 +32,7 @@
 //!      pixel first interpolates them (`on_demand`). New areas get records on demand as in
 //!      `static`. The result is exact: every record equals a fresh computation. Camera
 //!      samples use the same sub-pixel points every tick (the k-th of a tick's `spp`), so a
-//!      still view makes no records after its first tick; direct light still varies. Each
+//!      still view makes no records after its first tick (its direct light is drawn anew). Each
 //!      sample keeps its records and weights (`pixels.rs`): it looks the cache up again only
 //!      if its hit changed, one of its records went, or a record made this tick may reach
 //!      it; otherwise it only re-sums, and on a still tick (no scene change at all) it keeps
@@ -109,7 +111,7 @@ use crate::film::Film;
 use crate::scene::edits::SceneDelta;
 use crate::scene::Scene;
 use cache::Cache;
-use cameras::{CameraChange, Shaded};
+use cameras::{CameraChange, Reuse, Shaded};
 use glam::Vec3;
 use pixels::SampleState;
 use rayon::prelude::*;
@@ -151,6 +153,8 @@ pub struct InstantCache {
     /// `temporal`: each pass's camera samples from the last resident tick, and what may have
     /// changed them since (`cameras.rs`).
     cameras: Vec<Vec<Shaded>>,
+    /// The stream each of `cameras` drew from: its pass counted from the change before it.
+    camera_streams: Vec<u64>,
     camera_change: CameraChange,
     /// Refinement generations rendered since the last change.
     generation: u32,
@@ -194,6 +198,7 @@ impl InstantCache {
             samples: Vec::new(),
             kind: TickKind::Resident,
             cameras: Vec::new(),
+            camera_streams: Vec::new(),
             camera_change: CameraChange::All,
             generation: 0,
             refinement: Layer::default(),
@@ -318,7 +323,7 @@ impl InstantCache {
         let still = self.still && renumbering.is_none();
         if still {
             if let Some(kept) = pixels::all_kept(&states, &hits) {
-                self.pending.records_reused += mark_used(cache, None, cache.records.len(), ctx.tick);
+                self.pending.records_reused += pixels::mark_used(cache, None, cache.records.len(), ctx.tick);
                 self.pending.samples_reused += hits.iter().filter(|h| h.is_some()).count() as u64;
                 self.samples[k] = states;
                 return kept;
@@ -336,7 +341,7 @@ impl InstantCache {
         let looked_up = looked.iter().filter(|&&l| l).count() as u64;
         let out = pixels::interpolate_all(&cache.records, &mut states, &looked, still);
         let stats = &mut self.pending;
-        stats.records_reused += mark_used(cache, (looked_up > 0).then_some(&out.used), first_new, ctx.tick);
+        stats.records_reused += pixels::mark_used(cache, (looked_up > 0).then_some(&out.used), first_new, ctx.tick);
         stats.records_created += new.count;
         for (rays, refresh) in works {
             stats.visibility_rays_new += rays;
@@ -382,13 +387,17 @@ impl InstantCache {
                 Some(kept) => std::mem::take(kept),
                 None => Vec::new(),
             };
-            let moved = match &self.camera_change {
-                CameraChange::Moved(moved) if resident => Some(moved.as_ref()),
+            let reuse = match &self.camera_change {
+                CameraChange::Moved { moved, lights } if resident => Some(Reuse {
+                    moved: moved.as_ref(),
+                    direct: !lights && self.camera_streams.get(pass_in_tick) == Some(&self.passes),
+                }),
                 _ => None,
             };
             let stream = (self.passes, pass_in_tick as u64);
-            let counts = cameras::shade(ctx, mode, stream, &mut shaded, moved, self.config.audit);
+            let counts = cameras::shade(ctx, mode, stream, &mut shaded, reuse, self.config.audit);
             self.pending.camera_samples_kept += counts.kept;
+            self.pending.direct_samples_kept += counts.direct_kept;
             self.pending.audit_cameras_mismatched += counts.mismatched;
             let t = Instant::now();
             let indirect = match self.mode() {
@@ -420,7 +429,7 @@ impl InstantCache {
                 .collect();
             self.pending.camera_rays += shaded.len() as u64 - counts.kept;
             self.pending.specular_rays += shaded.iter().map(|s| s.sample.specular_rays).sum::<u64>();
-            self.pending.shadow_rays += shaded.iter().filter(|s| s.shadow).count() as u64;
+            self.pending.shadow_rays += counts.shadow_rays;
             film.accumulate_chunks(
                 scene.camera.width as usize,
                 |first, chunk| {
@@ -434,6 +443,8 @@ impl InstantCache {
             if resident {
                 self.cameras.resize_with(self.config.spp as usize, Vec::new);
                 self.cameras[pass_in_tick] = shaded;
+                self.camera_streams.resize(self.config.spp as usize, u64::MAX);
+                self.camera_streams[pass_in_tick] = self.passes;
             }
             self.passes += 1;
             film.passes += 1;
@@ -441,25 +452,6 @@ impl InstantCache {
         let bytes = self.cameras.iter().map(|c| c.capacity() * size_of::<Shaded>()).sum::<usize>();
         self.pending.memory.set("cameras", bytes as u64);
     }
-}
-
-/// Bytes the samples' states hold (`pixels.rs`).
-fn samples_bytes(samples: &[Vec<SampleState>]) -> u64 {
-    samples.iter().flatten().map(|s| pixels::STATE_BYTES + s.weights.capacity() as u64 * pixels::WEIGHT_BYTES).sum()
-}
-
-/// Marks the records the samples use (`used`, flags by index) as used at `tick` and returns
-/// how many of those before `first_new` (kept from earlier ticks) there are. `None` when every
-/// sample kept its list: the records used are then those used last tick.
-fn mark_used(cache: &mut Cache, used: Option<&[bool]>, first_new: usize, tick: u64) -> u64 {
-    let used: std::borrow::Cow<[bool]> = match used {
-        Some(used) => used.into(),
-        None => cache.records.iter().map(|r| r.last_used + 1 >= tick).collect(),
-    };
-    for (r, _) in cache.records.iter_mut().zip(used.iter()).filter(|(_, &u)| u) {
-        r.last_used = tick;
-    }
-    used[..first_new].iter().filter(|&&u| u).count() as u64
 }
 
 /// Computes the records made this pass (from `first_new` on) and re-evaluates flagged
@@ -542,10 +534,13 @@ impl Technique for InstantCache {
             // A moved light's shape is among the moved surfaces; a changed emitter may be a new shape.
             let emitters = delta.lights.iter().any(|l| l.emission_changed);
             let camera_change = delta.camera || !delta.materials.is_empty() || emitters;
-            self.camera_change = if camera_change { CameraChange::All } else { CameraChange::Moved(moved) };
+            self.camera_change = match camera_change {
+                true => CameraChange::All,
+                false => CameraChange::Moved { moved, lights: !delta.lights.is_empty() },
+            };
             // The resident records stay in use while still ticks render other generations.
             if let (TickKind::Refine | TickKind::Idle, Some(cache)) = (self.kind, self.cache.as_mut()) {
-                mark_used(cache, None, cache.records.len(), ctx.tick);
+                pixels::mark_used(cache, None, cache.records.len(), ctx.tick);
             }
             self.pending.invalidate_ms = t.elapsed().as_secs_f64() * 1e3;
         }
@@ -570,11 +565,11 @@ impl Technique for InstantCache {
         if self.config.mode != CacheMode::Igi {
             self.pending.records = self.cache.as_ref().map_or(0, |c| c.records.len() as u64);
             self.pending.memory.set("cache", self.cache.as_ref().map_or(0, Cache::memory_bytes));
-            self.pending.memory.set("samples", samples_bytes(&self.samples));
+            self.pending.memory.set("samples", pixels::samples_bytes(&self.samples));
         }
         let layer = &self.refinement;
         let cache = layer.cache.as_ref().map_or(0, Cache::memory_bytes);
-        self.pending.memory.set("refinement", cache + samples_bytes(&layer.samples));
+        self.pending.memory.set("refinement", cache + pixels::samples_bytes(&layer.samples));
         let mut stats = std::mem::take(&mut self.pending);
         stats.render_ms = start.elapsed().as_secs_f64() * 1e3;
         stats.visibility_rays = stats.visibility_rays_new

@@ -224,6 +224,25 @@ pub fn used(records: usize, states: &[SampleState]) -> Vec<bool> {
     flags.into_vec()
 }
 
+/// Bytes the samples' states hold.
+pub fn samples_bytes(samples: &[Vec<SampleState>]) -> u64 {
+    samples.iter().flatten().map(|s| STATE_BYTES + s.weights.capacity() as u64 * WEIGHT_BYTES).sum()
+}
+
+/// Marks the records the samples use (`used`, flags by index) as used at `tick` and returns
+/// how many of those before `first_new` (kept from earlier ticks) there are. `None` when every
+/// sample kept its list: the records used are then those used last tick.
+pub fn mark_used(cache: &mut Cache, used: Option<&[bool]>, first_new: usize, tick: u64) -> u64 {
+    let used: std::borrow::Cow<[bool]> = match used {
+        Some(used) => used.into(),
+        None => cache.records.iter().map(|r| r.last_used + 1 >= tick).collect(),
+    };
+    for (r, _) in cache.records.iter_mut().zip(used.iter()).filter(|(_, &u)| u) {
+        r.last_used = tick;
+    }
+    used[..first_new].iter().filter(|&&u| u).count() as u64
+}
+
 /// What [`audit`] found.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SampleAudit {

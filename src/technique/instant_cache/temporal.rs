@@ -38,7 +38,7 @@ use super::cache::{contribution, Record};
 use super::config::InstantCacheStats;
 use super::rgbe;
 use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
-use crate::embree::{CommittedScene, EmbreeError};
+use crate::embree::{CommittedScene, EmbreeError, Ray};
 use crate::scene::edits::{Aabb, MovedSurface, SceneDelta};
 use crate::scene::{Scene, SceneAccel, SurfaceId};
 use crate::technique::box_tree::{widened, BoxTree, SphereCone, BOX_SLACK};
@@ -202,6 +202,12 @@ impl Moved {
         let (new_boxes, old_boxes) = (BoxTree::new(new_bounds.clone()), BoxTree::new(old_bounds.clone()));
         let light_shapes = delta.moved.iter().any(|m| matches!(m.surface, SurfaceId::Light(_)));
         Ok(Moved { now, new_bounds, old_bounds, new_boxes, old_boxes, objects, light_shapes })
+    }
+
+    /// May a moved surface lie on the segment of `ray`, where it is now or where it was? (The
+    /// widened bounds' slab tests: conservative.)
+    pub fn on_ray(&self, ray: &Ray) -> bool {
+        self.new_boxes.hits(ray.origin, ray.dir, ray.tfar).0 || self.old_boxes.hits(ray.origin, ray.dir, ray.tfar).0
     }
 }
 

@@ -70,9 +70,9 @@ impl ParticleGi {
                 let s = camera_chain::trace(scene, ctx.accel, pixel, jitter, &mut rng);
                 let (direct, shadow) = match &s.hit {
                     Some(hit) => camera_chain::direct_light(scene, ctx.accel, hit, &mut rng),
-                    None => (Rgb::BLACK, false),
+                    None => (Rgb::BLACK, None),
                 };
-                Shaded { pixel, sample: s, direct, shadow }
+                Shaded { pixel, sample: s, direct, shadow: shadow.is_some() }
             })
             .collect();
         self.pending.camera_rays += samples.len() as u64;

@@ -74,10 +74,10 @@ impl PixelSample {
     /// Adds one NEE estimate at the hit. Returns whether a shadow ray was traced.
     pub fn add_direct(&mut self, scene: &Scene, accel: &SceneAccel, rng: &mut Rng) -> bool {
         let Some(hit) = &self.hit else { return false };
-        let (d, traced) = camera_chain::direct_light(scene, accel, hit, rng);
+        let (d, shadow) = camera_chain::direct_light(scene, accel, hit, rng);
         self.direct = [self.direct[0] + d.r, self.direct[1] + d.g, self.direct[2] + d.b];
         self.direct_n += 1;
-        traced
+        shadow.is_some()
     }
 
     /// Forgets the direct estimates (something may now shadow the hit, or light it).
