@@ -84,6 +84,15 @@ impl BoxTree {
         }
         let segment = Segment::new(origin, dir, t_max);
         let touches = |b: &Aabb| segment.touches(b);
+        let leaf = |n: &BoxNode| {
+            let boxes = &self.boxes[n.first as usize..(n.first + n.count) as usize];
+            let met = boxes.iter().position(touches);
+            (met.is_some(), met.map_or(boxes.len(), |k| k + 1) as u64)
+        };
+        // A tree of one leaf (one or two moved boxes, the common case) needs no stack.
+        if self.nodes[0].count > 0 {
+            return leaf(&self.nodes[0]);
+        }
         let mut stack = [0u32; 64];
         let mut top = 1;
         let mut tests = 0u64;
@@ -98,11 +107,10 @@ impl BoxTree {
                 }
             }
             if n.count > 0 {
-                for b in &self.boxes[n.first as usize..(n.first + n.count) as usize] {
-                    tests += 1;
-                    if touches(b) {
-                        return (true, tests);
-                    }
+                let (met, leaf_tests) = leaf(&n);
+                tests += leaf_tests;
+                if met {
+                    return (true, tests);
                 }
             } else if top + 2 <= stack.len() {
                 stack[top] = n.first;

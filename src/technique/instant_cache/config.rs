@@ -195,7 +195,7 @@ pub struct InstantCacheStats {
     pub samples_reused: u64,
     /// Camera samples that looked the cache up (the rest kept their records: `pixels.rs`).
     pub samples_looked_up: u64,
-    /// Octree queries: samples' lookups and the coverage tests of samples with no record.
+    /// Grid queries: samples' lookups and the coverage tests of samples with no record.
     pub cache_lookups: u64,
     /// `temporal`: records re-evaluated, and by case those with a ray retraced or a
     /// contribution changed (`vpl`: cases 1–2, a VPL moved, appeared or changed intensity).

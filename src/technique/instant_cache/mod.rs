@@ -291,10 +291,10 @@ impl InstantCache {
         }
     }
 
-    /// Indirect irradiance per pixel from the cache (`pixels.rs`): samples keep or look up
-    /// their records; in pixel order, samples no record covers get a new one; samples new
-    /// records reach look up again; new and flagged records are computed in parallel; each
-    /// sample interpolates its records. `renumbering`: how record indices changed since the
+    /// Indirect irradiance per pixel from the cache (`pixels.rs`): samples keep their records
+    /// or clear them; in pixel order, samples no record covers get a new one; samples that
+    /// cleared their list or that new records reach look up; new and flagged records are
+    /// computed in parallel; each sample interpolates its records. `renumbering`: how record indices changed since the
     /// last tick's passes.
     fn cached_indirect(
         &mut self,
@@ -331,14 +331,13 @@ impl InstantCache {
         }
         let previous = if self.config.audit && temporal { states.clone() } else { Vec::new() };
         let first_new = cache.records.len();
-        let looked = pixels::keep_or_look_up(cache, &mut states, &hits, renumbering, temporal);
+        let needs = pixels::keep_lists(&mut states, &hits, renumbering, temporal);
         let cells = pixels::NewRecords::new(extent.lo, extent.hi, cache.reach());
         let (new, coverage_tests) = pixels::place_records(cache, &states, ctx.tick, cells);
-        let relooked = pixels::look_up_near(cache, &mut states, &new);
+        let looked = pixels::look_up(cache, &mut states, &needs, &new);
         let works = compute_records(ctx, cache, &self.vpls, self.changes.as_ref(), first_new, &states, min_distance);
-        let lookups = looked.iter().chain(&relooked).filter(|&&l| l).count() as u64 + coverage_tests;
-        let looked: Vec<bool> = looked.iter().zip(&relooked).map(|(a, b)| *a || *b).collect();
         let looked_up = looked.iter().filter(|&&l| l).count() as u64;
+        let lookups = looked_up + coverage_tests;
         let out = pixels::interpolate_all(&cache.records, &mut states, &looked, still);
         let stats = &mut self.pending;
         stats.records_reused += pixels::mark_used(cache, (looked_up > 0).then_some(&out.used), first_new, ctx.tick);

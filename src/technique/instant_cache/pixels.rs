@@ -1,10 +1,11 @@
 //! Each camera sample's interpolation (eq. 4): the records with w_k(x) > 1 at its first
 //! diffuse hit x and their weights, which `temporal` keeps from tick to tick.
 //!
-//! A sample looks the cache up (one grid query) only when it must: its hit changed, one of
-//! its records went (`Cache::retain` reports the renumbering), or a record made this tick may
-//! reach it (a cell grid of this tick's new records says so; cells are at least the records'
-//! reach wide, so the 27 cells around a new record hold every point it reaches). Otherwise it
+//! A sample looks the cache up (one grid query, once a pass, after the pass's new records are
+//! placed) only when it must: its hit changed, one of its records went (`Cache::retain`
+//! reports the renumbering), or a record made this tick may reach it (a cell grid of this
+//! tick's new records says so; cells are at least the records' reach wide, so the 27 cells
+//! around a new record hold every point it reaches). Otherwise it
 //! keeps its list, and only the weighted sum is redone, since re-evaluation may have changed
 //! the records' irradiance. On a still tick (nothing in the scene changed) even the sum is
 //! kept.
@@ -45,7 +46,7 @@ pub const STATE_BYTES: u64 = std::mem::size_of::<SampleState>() as u64;
 pub const WEIGHT_BYTES: u64 = std::mem::size_of::<(u32, f32)>() as u64;
 
 /// The records with w > 1 at `hit`, by index.
-fn look_up(cache: &Cache, hit: HitKey, weights: &mut Vec<(u32, f32)>) {
+fn look_up_at(cache: &Cache, hit: HitKey, weights: &mut Vec<(u32, f32)>) {
     weights.clear();
     cache.near(hit.0, hit.1, |i, w| weights.push((i, w)));
     weights.sort_unstable_by_key(|e| e.0);
@@ -67,17 +68,15 @@ pub fn all_kept(states: &[SampleState], hits: &[Option<HitKey>]) -> Option<Vec<O
 }
 
 /// Step 1 of a pass: each sample keeps its list (`keep`, same hit, no record of it gone) or
-/// looks the cache up; in an empty cache (rebuilt each tick by `static`, or the first) there
-/// is nothing to find, and step 2 tests every sample's coverage. Returns per sample whether it
-/// looked up.
-pub fn keep_or_look_up(
-    cache: &Cache,
+/// clears it, to look the cache up in step 3, after the new records are placed (a cleared
+/// list makes step 2 test the sample's coverage, as an empty lookup would). Returns per
+/// sample whether it must look up.
+pub fn keep_lists(
     states: &mut [SampleState],
     hits: &[Option<HitKey>],
     renumbering: Option<&[u32]>,
     keep: bool,
 ) -> Vec<bool> {
-    let empty = cache.records.is_empty();
     states
         .par_iter_mut()
         .zip(hits)
@@ -87,16 +86,8 @@ pub fn keep_or_look_up(
                 return false;
             }
             state.hit = hit;
-            match hit {
-                Some(h) if !empty => {
-                    look_up(cache, h, &mut state.weights);
-                    true
-                }
-                _ => {
-                    state.weights.clear();
-                    false
-                }
-            }
+            state.weights.clear();
+            hit.is_some()
         })
         .collect()
 }
@@ -155,14 +146,15 @@ pub fn place_records(cache: &mut Cache, states: &[SampleState], tick: u64, mut n
     (new, tests)
 }
 
-/// Step 3: samples a new record may reach look the cache up (again). Returns per sample
-/// whether it did.
-pub fn look_up_near(cache: &Cache, states: &mut [SampleState], new: &NewRecords) -> Vec<bool> {
+/// Step 3: samples that must (`needs`, from step 1) or that a new record may reach look the
+/// cache up. Returns per sample whether it did.
+pub fn look_up(cache: &Cache, states: &mut [SampleState], needs: &[bool], new: &NewRecords) -> Vec<bool> {
     states
         .par_iter_mut()
-        .map(|state| match state.hit {
-            Some(h) if new.near(h.0) => {
-                look_up(cache, h, &mut state.weights);
+        .zip(needs)
+        .map(|(state, &needs)| match state.hit {
+            Some(h) if needs || new.near(h.0) => {
+                look_up_at(cache, h, &mut state.weights);
                 true
             }
             _ => false,
@@ -268,7 +260,7 @@ pub fn audit(
         .map(|(k, s)| {
             let mut fresh = Vec::new();
             if let Some(h) = s.hit {
-                look_up(cache, h, &mut fresh);
+                look_up_at(cache, h, &mut fresh);
             }
             let needed = previous.get(k).is_none_or(|p| {
                 let mut old = p.weights.clone();
@@ -334,17 +326,17 @@ mod tests {
         let (mut states, hits) = states_on_grid(32);
         let run = |use_cells: bool, states: &mut Vec<SampleState>| {
             let mut cache = plane_cache(&points);
-            keep_or_look_up(&cache, states, &hits, None, true);
+            let reach = cache.reach();
+            let no_cells = || NewRecords::new(Vec3::ZERO, Vec3::ONE, reach);
+            let needs = keep_lists(states, &hits, None, true);
+            look_up(&cache, states, &needs, &no_cells());
             cache.retain(|r| r.position.x < 0.5);
             let map = cache.take_renumbering().expect("records went");
-            let looked = keep_or_look_up(&cache, states, &hits, Some(&map), true);
-            assert!(looked.iter().any(|&l| l) && looked.iter().any(|&l| !l), "some kept, some looked up");
-            let cells = NewRecords::new(Vec3::ZERO, Vec3::ONE, cache.reach());
-            let (new, _) = place_records(&mut cache, states, 1, cells);
+            let needs = keep_lists(states, &hits, Some(&map), true);
+            assert!(needs.iter().any(|&l| l) && needs.iter().any(|&l| !l), "some kept, some look up");
+            let (new, _) = place_records(&mut cache, states, 1, no_cells());
             assert!(new.count > 0, "the removed area gets new records");
-            if use_cells {
-                look_up_near(&cache, states, &new);
-            }
+            look_up(&cache, states, &needs, &if use_cells { new } else { no_cells() });
             audit(&cache, states, &[], None).mismatched
         };
         assert_eq!(run(true, &mut states), 0, "kept lists differ from fresh lookups");

@@ -175,6 +175,8 @@ pub struct Moved {
     old_bounds: Vec<Aabb>,
     pub new_boxes: BoxTree,
     old_boxes: BoxTree,
+    /// Each surface's old and new bounds together: one test for "where it is or was".
+    swept_boxes: BoxTree,
     /// `objects[object]`: the object moved this tick.
     pub objects: Vec<bool>,
     /// A light's shape moved this tick.
@@ -200,14 +202,15 @@ impl Moved {
             |b: fn(&MovedSurface) -> &Aabb| -> Vec<Aabb> { delta.moved.iter().map(|m| widened(b(m), slack)).collect() };
         let (new_bounds, old_bounds) = (boxes(|m| &m.new_bounds), boxes(|m| &m.old_bounds));
         let (new_boxes, old_boxes) = (BoxTree::new(new_bounds.clone()), BoxTree::new(old_bounds.clone()));
+        let swept_boxes = BoxTree::new(new_bounds.iter().zip(&old_bounds).map(|(a, b)| a.union(b)).collect());
         let light_shapes = delta.moved.iter().any(|m| matches!(m.surface, SurfaceId::Light(_)));
-        Ok(Moved { now, new_bounds, old_bounds, new_boxes, old_boxes, objects, light_shapes })
+        Ok(Moved { now, new_bounds, old_bounds, new_boxes, old_boxes, swept_boxes, objects, light_shapes })
     }
 
-    /// May a moved surface lie on the segment of `ray`, where it is now or where it was? (The
-    /// widened bounds' slab tests: conservative.)
+    /// May a moved surface lie on the segment of `ray`, where it is now or where it was? (A
+    /// slab test against the box around both of its widened bounds: conservative.)
     pub fn on_ray(&self, ray: &Ray) -> bool {
-        self.new_boxes.hits(ray.origin, ray.dir, ray.tfar).0 || self.old_boxes.hits(ray.origin, ray.dir, ray.tfar).0
+        self.swept_boxes.hits(ray.origin, ray.dir, ray.tfar).0
     }
 }
 
