@@ -65,15 +65,29 @@ pub struct CameraCounts {
     pub mismatched: u64,
 }
 
-impl std::ops::Add for CameraCounts {
-    type Output = CameraCounts;
-    fn add(self, o: CameraCounts) -> CameraCounts {
-        CameraCounts {
-            kept: self.kept + o.kept,
-            direct_kept: self.direct_kept + o.direct_kept,
-            shadow_rays: self.shadow_rays + o.shadow_rays,
-            mismatched: self.mismatched + o.mismatched,
-        }
+/// A pass's shading: its counts, and per sample whether its camera sample was kept (so its
+/// hit is last tick's, and what was kept of it need not be read again).
+pub struct Shading {
+    pub counts: CameraCounts,
+    pub kept: Vec<bool>,
+}
+
+/// What happened to one sample, as bits.
+const KEPT: u8 = 1;
+const DIRECT_KEPT: u8 = 2;
+const SHADOW_RAY: u8 = 4;
+const MISMATCHED: u8 = 8;
+
+impl Shading {
+    fn new(outcomes: &[u8]) -> Shading {
+        let count = |bit: u8| outcomes.iter().filter(|&&o| o & bit != 0).count() as u64;
+        let counts = CameraCounts {
+            kept: count(KEPT),
+            direct_kept: count(DIRECT_KEPT),
+            shadow_rays: count(SHADOW_RAY),
+            mismatched: count(MISMATCHED),
+        };
+        Shading { counts, kept: outcomes.iter().map(|&o| o & KEPT != 0).collect() }
     }
 }
 
@@ -117,12 +131,12 @@ pub fn shade(
     shaded: &mut Vec<Shaded>,
     reuse: Option<Reuse>,
     audit: bool,
-) -> CameraCounts {
+) -> Shading {
     let scene = ctx.scene;
     let pixels = (scene.camera.width * scene.camera.height) as usize;
     let reuse = reuse.filter(|_| shaded.len() == pixels);
     shaded.resize(pixels, Shaded::default());
-    shaded
+    let outcomes: Vec<u8> = shaded
         .par_iter_mut()
         .enumerate()
         .map(|(i, s)| {
@@ -140,9 +154,9 @@ pub fn shade(
             };
             let keep =
                 reuse.is_some_and(|r| still_valid(r.moved, &camera_chain::camera_ray(scene, i, jitter), &s.sample));
-            let mut counts = CameraCounts { kept: u64::from(keep), ..CameraCounts::default() };
+            let mut outcome = if keep { KEPT } else { 0 };
             if keep && audit && camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng.clone()) != s.sample {
-                counts.mismatched = 1;
+                outcome |= MISMATCHED;
             }
             if !keep {
                 s.sample = camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng);
@@ -151,16 +165,17 @@ pub fn shade(
                 keep && reuse.is_some_and(|r| r.direct && s.shadow.is_none_or(|ray| !r.moved.on_ray(&ray)));
             if !keep_direct {
                 (s.direct, s.shadow) = direct_light(ctx, &s.sample, &mut rng);
-                counts.shadow_rays = u64::from(s.shadow.is_some());
+                outcome |= if s.shadow.is_some() { SHADOW_RAY } else { 0 };
             } else {
-                counts.direct_kept = 1;
+                outcome |= DIRECT_KEPT;
                 if audit && direct_light(ctx, &s.sample, &mut rng) != (s.direct, s.shadow) {
-                    counts.mismatched = 1;
+                    outcome |= MISMATCHED;
                 }
             }
-            counts
+            outcome
         })
-        .reduce(CameraCounts::default, |a, b| a + b)
+        .collect();
+    Shading::new(&outcomes)
 }
 
 /// Direct light at the sample's diffuse hit, and the shadow ray traced, if any.

@@ -300,7 +300,7 @@ impl InstantCache {
         &mut self,
         ctx: &RenderContext,
         k: usize,
-        shaded: &[Shaded],
+        (shaded, kept): (&[Shaded], &[bool]),
         renumbering: Option<&[u32]>,
     ) -> Vec<Option<Rgb>> {
         let min_distance = self.min_distance(ctx);
@@ -318,22 +318,22 @@ impl InstantCache {
         if states.len() != shaded.len() {
             states = vec![SampleState::default(); shaded.len()];
         }
-        let hits: Vec<_> = shaded.par_iter().map(|s| pixels::hit_key(&s.sample)).collect();
         // No record changed or went: samples that keep their records keep their irradiance.
         let still = self.still && renumbering.is_none();
         if still {
-            if let Some(kept) = pixels::all_kept(&states, &hits) {
+            if let Some(indirect) = pixels::all_kept(&states, kept) {
                 self.pending.records_reused += pixels::mark_used(cache, None, cache.records.len(), ctx.tick);
-                self.pending.samples_reused += hits.iter().filter(|h| h.is_some()).count() as u64;
+                self.pending.samples_reused += indirect.iter().filter(|e| e.is_some()).count() as u64;
                 self.samples[k] = states;
-                return kept;
+                return indirect;
             }
         }
         let previous = if self.config.audit && temporal { states.clone() } else { Vec::new() };
         let first_new = cache.records.len();
-        let needs = pixels::keep_lists(&mut states, &hits, renumbering, temporal);
+        let hit = |i: usize| pixels::hit_key(&shaded[i].sample);
+        let needs = pixels::keep_lists(&mut states, (hit, kept), renumbering, temporal);
         let cells = pixels::NewRecords::new(extent.lo, extent.hi, cache.reach());
-        let (new, coverage_tests) = pixels::place_records(cache, &states, ctx.tick, cells);
+        let (new, coverage_tests) = pixels::place_records(cache, &states, &needs, ctx.tick, cells);
         let looked = pixels::look_up(cache, &mut states, &needs, &new);
         let works = compute_records(ctx, cache, &self.vpls, self.changes.as_ref(), first_new, &states, min_distance);
         let looked_up = looked.iter().filter(|&&l| l).count() as u64;
@@ -353,7 +353,7 @@ impl InstantCache {
         stats.samples_looked_up += looked_up;
         stats.cache_lookups += lookups;
         if self.config.audit {
-            let audit = pixels::audit(cache, &states, &previous, renumbering);
+            let audit = pixels::audit(cache, &states, hit, &previous, renumbering);
             stats.audit_samples_mismatched += audit.mismatched;
             stats.audit_samples_needed += audit.needed;
         }
@@ -394,7 +394,8 @@ impl InstantCache {
                 _ => None,
             };
             let stream = (self.passes, pass_in_tick as u64);
-            let counts = cameras::shade(ctx, mode, stream, &mut shaded, reuse, self.config.audit);
+            let cameras::Shading { counts, kept } =
+                cameras::shade(ctx, mode, stream, &mut shaded, reuse, self.config.audit);
             self.pending.camera_samples_kept += counts.kept;
             self.pending.direct_samples_kept += counts.direct_kept;
             self.pending.audit_cameras_mismatched += counts.mismatched;
@@ -408,7 +409,7 @@ impl InstantCache {
                     indirect
                 }
                 CacheMode::Static | CacheMode::Temporal => {
-                    self.cached_indirect(ctx, pass_in_tick, &shaded, renumbering.as_deref())
+                    self.cached_indirect(ctx, pass_in_tick, (&shaded, &kept), renumbering.as_deref())
                 }
             };
             self.pending.indirect_ms += t.elapsed().as_secs_f64() * 1e3;

@@ -60,34 +60,36 @@ fn renumber(weights: &mut [(u32, f32)], renumbering: &[u32]) -> bool {
     })
 }
 
-/// A still tick's shortcut: if every sample found last tick's hit, their kept irradiance (no
-/// record changed, and none is needed); else `None`.
-pub fn all_kept(states: &[SampleState], hits: &[Option<HitKey>]) -> Option<Vec<Option<Rgb>>> {
-    let same = states.len() == hits.len() && states.par_iter().zip(hits).all(|(s, h)| s.hit == *h);
+/// A still tick's shortcut: if every camera sample was kept (`kept`), so each found last
+/// tick's hit, their kept irradiance (no record changed, and none is needed); else `None`.
+pub fn all_kept(states: &[SampleState], kept: &[bool]) -> Option<Vec<Option<Rgb>>> {
+    let same = states.len() == kept.len() && kept.par_iter().all(|&k| k);
     same.then(|| states.par_iter().map(|s| s.indirect).collect())
 }
 
-/// Step 1 of a pass: each sample keeps its list (`keep`, same hit, no record of it gone) or
-/// clears it, to look the cache up in step 3, after the new records are placed (a cleared
-/// list makes step 2 test the sample's coverage, as an empty lookup would). Returns per
-/// sample whether it must look up.
+/// Step 1 of a pass: each sample keeps its list (`keep`, its camera sample `kept` so its hit is
+/// the one its state holds, a list that is not empty, no record of it gone) or clears it, to
+/// look the cache up in step 3 after the new records are placed. Only the hits of samples
+/// that do not keep their list are asked for (`hit`, by sample index). Returns per sample whether it cleared its list and has a
+/// hit: step 2 tests those samples' coverage, and step 3 looks them up.
 pub fn keep_lists(
     states: &mut [SampleState],
-    hits: &[Option<HitKey>],
+    (hit, kept): (impl Fn(usize) -> Option<HitKey> + Sync, &[bool]),
     renumbering: Option<&[u32]>,
     keep: bool,
 ) -> Vec<bool> {
     states
         .par_iter_mut()
-        .zip(hits)
-        .map(|(state, &hit)| {
-            let kept = keep && hit.is_some() && state.hit == hit;
-            if kept && renumbering.is_none_or(|map| renumber(&mut state.weights, map)) {
+        .zip(kept)
+        .enumerate()
+        .map(|(i, (state, &kept))| {
+            let stays = keep && kept && !state.weights.is_empty();
+            if stays && renumbering.is_none_or(|map| renumber(&mut state.weights, map)) {
                 return false;
             }
-            state.hit = hit;
+            state.hit = hit(i);
             state.weights.clear();
-            hit.is_some()
+            state.hit.is_some()
         })
         .collect()
 }
@@ -130,12 +132,19 @@ impl NewRecords {
     }
 }
 
-/// Step 2, in sample order (so the image does not depend on the thread count): a sample no
-/// record covers gets a new one (without contributions yet), unless one made earlier in this
-/// loop covers it. Returns the cells the new records reach and the coverage tests made.
-pub fn place_records(cache: &mut Cache, states: &[SampleState], tick: u64, mut new: NewRecords) -> (NewRecords, u64) {
+/// Step 2, in sample order (so the image does not depend on the thread count): a sample that
+/// cleared its list (`cleared`) and that no record covers gets a new one (without
+/// contributions yet), unless one made earlier in this loop covers it. Samples that kept their
+/// list are covered by it. Returns the cells the new records reach and the coverage tests made.
+pub fn place_records(
+    cache: &mut Cache,
+    states: &[SampleState],
+    cleared: &[bool],
+    tick: u64,
+    mut new: NewRecords,
+) -> (NewRecords, u64) {
     let mut tests = 0;
-    for state in states.iter().filter(|s| s.weights.is_empty()) {
+    for (state, _) in states.iter().zip(cleared).filter(|(_, &c)| c) {
         let Some((p, n, object)) = state.hit else { continue };
         tests += 1;
         if !cache.covers(p, n) {
@@ -238,18 +247,21 @@ pub fn mark_used(cache: &mut Cache, used: Option<&[bool]>, first_new: usize, tic
 /// What [`audit`] found.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct SampleAudit {
-    /// Samples whose list differs from a fresh lookup (the invariant above).
+    /// Samples whose hit or list differs from a fresh lookup at the camera sample's hit (the
+    /// invariant above).
     pub mismatched: u64,
     /// Samples that had to look up: their hit or their records differ from last tick's
     /// (`previous`, followed through `renumbering`).
     pub needed: u64,
 }
 
-/// Checks every sample's list against a fresh lookup, and counts the samples whose list had
-/// to change since `previous` (for `audit`).
+/// Checks every sample's hit against its camera sample's (`hit`, by index) and its list
+/// against a fresh lookup there, and counts the samples whose list had to change since
+/// `previous` (for `audit`).
 pub fn audit(
     cache: &Cache,
     states: &[SampleState],
+    hit: impl Fn(usize) -> Option<HitKey> + Sync,
     previous: &[SampleState],
     renumbering: Option<&[u32]>,
 ) -> SampleAudit {
@@ -259,7 +271,7 @@ pub fn audit(
         .enumerate()
         .map(|(k, s)| {
             let mut fresh = Vec::new();
-            if let Some(h) = s.hit {
+            if let Some(h) = hit(k) {
                 look_up_at(cache, h, &mut fresh);
             }
             let needed = previous.get(k).is_none_or(|p| {
@@ -267,7 +279,8 @@ pub fn audit(
                 let stayed = renumbering.is_none_or(|map| renumber(&mut old, map));
                 p.hit != s.hit || !stayed || bits(&old) != bits(&fresh)
             });
-            SampleAudit { mismatched: u64::from(bits(&fresh) != bits(&s.weights)), needed: u64::from(needed) }
+            let mismatched = hit(k) != s.hit || bits(&fresh) != bits(&s.weights);
+            SampleAudit { mismatched: u64::from(mismatched), needed: u64::from(needed) }
         })
         .reduce(SampleAudit::default, |a, b| SampleAudit {
             mismatched: a.mismatched + b.mismatched,
@@ -328,16 +341,18 @@ mod tests {
             let mut cache = plane_cache(&points);
             let reach = cache.reach();
             let no_cells = || NewRecords::new(Vec3::ZERO, Vec3::ONE, reach);
-            let needs = keep_lists(states, &hits, None, true);
+            let hit = |i: usize| hits[i];
+            // The first pass traces every camera sample; the second keeps them all.
+            let needs = keep_lists(states, (hit, &vec![false; hits.len()]), None, true);
             look_up(&cache, states, &needs, &no_cells());
             cache.retain(|r| r.position.x < 0.5);
             let map = cache.take_renumbering().expect("records went");
-            let needs = keep_lists(states, &hits, Some(&map), true);
+            let needs = keep_lists(states, (hit, &vec![true; hits.len()]), Some(&map), true);
             assert!(needs.iter().any(|&l| l) && needs.iter().any(|&l| !l), "some kept, some look up");
-            let (new, _) = place_records(&mut cache, states, 1, no_cells());
+            let (new, _) = place_records(&mut cache, states, &needs, 1, no_cells());
             assert!(new.count > 0, "the removed area gets new records");
             look_up(&cache, states, &needs, &if use_cells { new } else { no_cells() });
-            audit(&cache, states, &[], None).mismatched
+            audit(&cache, states, hit, &[], None).mismatched
         };
         assert_eq!(run(true, &mut states), 0, "kept lists differ from fresh lookups");
         let (mut control, _) = states_on_grid(32);
