@@ -52,19 +52,24 @@ impl Camera {
     /// [`Camera::ray`] takes them, and the cosine between that ray and the view axis. `None`
     /// behind the camera or outside the image.
     pub fn raster(&self, p: Vec3) -> Option<(f32, f32, f32)> {
+        let (x, y) = self.film_point(p)?;
+        let d = p - self.position;
+        let inside = (0.0..self.width as f32).contains(&x) && (0.0..self.height as f32).contains(&y);
+        inside.then(|| (x, y, d.dot(self.forward) / d.length()))
+    }
+
+    /// Where a ray from the camera to `p` crosses the film plane, in pixels as [`Camera::ray`]
+    /// takes them (inside the image or not); `None` when `p` is not in front of the camera.
+    pub fn film_point(&self, p: Vec3) -> Option<(f32, f32)> {
         let d = p - self.position;
         let depth = d.dot(self.forward);
-        let length = d.length();
-        if depth <= 0.0 || length == 0.0 {
+        if depth <= 0.0 || d.length() == 0.0 {
             return None;
         }
         let aspect = self.width as f32 / self.height as f32;
         let sx = d.dot(self.right) / depth / (self.tan_half_vfov * aspect);
         let sy = d.dot(self.up) / depth / self.tan_half_vfov;
-        let x = (sx + 1.0) * 0.5 * self.width as f32;
-        let y = (1.0 - sy) * 0.5 * self.height as f32;
-        let inside = (0.0..self.width as f32).contains(&x) && (0.0..self.height as f32).contains(&y);
-        inside.then_some((x, y, depth / length))
+        Some(((sx + 1.0) * 0.5 * self.width as f32, (1.0 - sy) * 0.5 * self.height as f32))
     }
 
     /// Area of the image on the plane one unit in front of the pinhole.

@@ -30,6 +30,7 @@ use crate::core::{Rgb, Rng};
 use crate::embree::Ray;
 use crate::technique::camera_chain::{self, CameraSample};
 use crate::technique::RenderContext;
+use glam::Vec2;
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -100,21 +101,27 @@ pub struct Reuse<'a> {
     pub direct: bool,
 }
 
-/// Is the kept sample `s` of `ray` still what a fresh trace finds after `moved`?
-fn still_valid(moved: &Moved, ray: &Ray, s: &CameraSample) -> bool {
+/// Is the kept sample `s` of pixel `pixel` still what a fresh trace of its camera ray (`ray`,
+/// made only if needed) finds after `moved`?
+fn still_valid(moved: &Moved, pixel: usize, ray: impl FnOnce() -> Ray, s: &CameraSample) -> bool {
     if s.specular_rays > 0 || !s.emitted.is_black() {
         return false;
     }
-    let tfar = match &s.hit {
+    let end = match &s.hit {
         Some(hit) if moved.objects.get(hit.object as usize).copied().unwrap_or(true) => return false,
-        Some(hit) => (hit.p - ray.origin).length() / ray.dir.length(),
+        Some(hit) => Some(hit.p),
         // A ray that met a light's back side ends without emission or hit, as a miss does: if
         // a light's shape moved, what it hid may show now.
         None if moved.light_shapes => return false,
-        None => f32::INFINITY,
+        None => None,
     };
     let Some(now) = &moved.now else { return true };
-    !moved.new_boxes.hits(ray.origin, ray.dir, tfar).0 || !now.occluded1(&Ray { tfar, ..*ray })
+    if !moved.may_show(pixel) {
+        return true;
+    }
+    let ray = ray();
+    let tfar = end.map_or(f32::INFINITY, |p| (p - ray.origin).length() / ray.dir.length());
+    !moved.new_boxes.hits(ray.origin, ray.dir, tfar).0 || !now.occluded1(&Ray { tfar, ..ray })
 }
 
 /// The `tick` key of `temporal`'s resident streams, which no tick reaches: they depend on the
@@ -139,43 +146,79 @@ pub fn shade(
     let outcomes: Vec<u8> = shaded
         .par_iter_mut()
         .enumerate()
-        .map(|(i, s)| {
-            let (mut rng, jitter) = match mode {
-                // The same sub-pixel points every tick, so a still view finds its records.
-                CacheMode::Temporal => (
-                    Rng::for_sample(ctx.seed, RESIDENT_STREAM, i as u64, pass),
-                    Rng::for_sample(ctx.seed, 0, i as u64, pass_in_tick).next_2d(),
-                ),
-                CacheMode::Igi | CacheMode::Static => {
-                    let mut rng = Rng::for_sample(ctx.seed, ctx.tick, i as u64, pass);
-                    let jitter = rng.next_2d();
-                    (rng, jitter)
-                }
-            };
-            let keep =
-                reuse.is_some_and(|r| still_valid(r.moved, &camera_chain::camera_ray(scene, i, jitter), &s.sample));
-            let mut outcome = if keep { KEPT } else { 0 };
-            if keep && audit && camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng.clone()) != s.sample {
-                outcome |= MISMATCHED;
-            }
-            if !keep {
-                s.sample = camera_chain::trace(scene, ctx.accel, i, jitter, &mut rng);
-            }
-            let keep_direct =
-                keep && reuse.is_some_and(|r| r.direct && s.shadow.is_none_or(|ray| !r.moved.on_ray(&ray)));
-            if !keep_direct {
-                (s.direct, s.shadow) = direct_light(ctx, &s.sample, &mut rng);
-                outcome |= if s.shadow.is_some() { SHADOW_RAY } else { 0 };
-            } else {
-                outcome |= DIRECT_KEPT;
-                if audit && direct_light(ctx, &s.sample, &mut rng) != (s.direct, s.shadow) {
-                    outcome |= MISMATCHED;
-                }
-            }
-            outcome
-        })
+        .map(|(i, s)| shade_one(ctx, i, s, &mut SampleRng::new(ctx, mode, i, (pass, pass_in_tick)), reuse, audit))
         .collect();
     Shading::new(&outcomes)
+}
+
+/// A sample's sub-pixel point and random stream, made when first needed: `temporal`'s are
+/// functions of the pixel and the pass, so a sample kept with its direct light makes neither.
+/// `igi` and `static` draw the point from the stream of the tick.
+struct SampleRng {
+    rng: Option<Rng>,
+    jitter: Option<Vec2>,
+    key: (u64, u64, u64, u64),
+}
+
+impl SampleRng {
+    fn new(ctx: &RenderContext, mode: CacheMode, i: usize, (pass, pass_in_tick): (u64, u64)) -> SampleRng {
+        let key = (ctx.seed, i as u64, pass, pass_in_tick);
+        match mode {
+            CacheMode::Temporal => SampleRng { rng: None, jitter: None, key },
+            CacheMode::Igi | CacheMode::Static => {
+                let mut rng = Rng::for_sample(ctx.seed, ctx.tick, i as u64, pass);
+                let jitter = rng.next_2d();
+                SampleRng { rng: Some(rng), jitter: Some(jitter), key }
+            }
+        }
+    }
+
+    /// The sub-pixel point: the same every tick in `temporal`, so a still view finds its records.
+    fn jitter(&mut self) -> Vec2 {
+        let (seed, i, _, pass_in_tick) = self.key;
+        *self.jitter.get_or_insert_with(|| Rng::for_sample(seed, 0, i, pass_in_tick).next_2d())
+    }
+
+    fn rng(&mut self) -> &mut Rng {
+        let (seed, i, pass, _) = self.key;
+        self.rng.get_or_insert_with(|| Rng::for_sample(seed, RESIDENT_STREAM, i, pass))
+    }
+}
+
+/// Shades pixel `i`'s sample `s`, keeping what `reuse` allows. Returns what happened, as bits.
+fn shade_one(
+    ctx: &RenderContext,
+    i: usize,
+    s: &mut Shaded,
+    r: &mut SampleRng,
+    reuse: Option<Reuse>,
+    audit: bool,
+) -> u8 {
+    let (scene, accel) = (ctx.scene, ctx.accel);
+    let keep =
+        reuse.is_some_and(|m| still_valid(m.moved, i, || camera_chain::camera_ray(scene, i, r.jitter()), &s.sample));
+    let mut outcome = if keep { KEPT } else { 0 };
+    if keep && audit {
+        let jitter = r.jitter();
+        if camera_chain::trace(scene, accel, i, jitter, &mut r.rng().clone()) != s.sample {
+            outcome |= MISMATCHED;
+        }
+    }
+    if !keep {
+        let jitter = r.jitter();
+        s.sample = camera_chain::trace(scene, accel, i, jitter, r.rng());
+    }
+    let keep_direct = keep && reuse.is_some_and(|m| m.direct && s.shadow.is_none_or(|ray| !m.moved.on_ray(&ray)));
+    if !keep_direct {
+        (s.direct, s.shadow) = direct_light(ctx, &s.sample, r.rng());
+        outcome |= if s.shadow.is_some() { SHADOW_RAY } else { 0 };
+    } else {
+        outcome |= DIRECT_KEPT;
+        if audit && direct_light(ctx, &s.sample, r.rng()) != (s.direct, s.shadow) {
+            outcome |= MISMATCHED;
+        }
+    }
+    outcome
 }
 
 /// Direct light at the sample's diffuse hit, and the shadow ray traced, if any.

@@ -40,7 +40,7 @@ use super::rgbe;
 use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
 use crate::embree::{CommittedScene, EmbreeError, Ray};
 use crate::scene::edits::{Aabb, MovedSurface, SceneDelta};
-use crate::scene::{Scene, SceneAccel, SurfaceId};
+use crate::scene::{Camera, Scene, SceneAccel, SurfaceId};
 use crate::technique::box_tree::{widened, BoxTree, SphereCone, BOX_SLACK};
 use glam::Vec3;
 use std::sync::Arc;
@@ -181,6 +181,11 @@ pub struct Moved {
     pub objects: Vec<bool>,
     /// A light's shape moved this tick.
     pub light_shapes: bool,
+    /// The film rectangles (`[x0, y0, x1, y1]` in pixels, widened by a pixel) the new bounds
+    /// project into, so a camera ray through a pixel outside all of them meets no moved
+    /// surface; `None` when a box reaches to or behind the camera plane (any pixel may).
+    screen: Option<Vec<[f32; 4]>>,
+    width: usize,
 }
 
 impl Moved {
@@ -204,7 +209,28 @@ impl Moved {
         let (new_boxes, old_boxes) = (BoxTree::new(new_bounds.clone()), BoxTree::new(old_bounds.clone()));
         let swept_boxes = BoxTree::new(new_bounds.iter().zip(&old_bounds).map(|(a, b)| a.union(b)).collect());
         let light_shapes = delta.moved.iter().any(|m| matches!(m.surface, SurfaceId::Light(_)));
-        Ok(Moved { now, new_bounds, old_bounds, new_boxes, old_boxes, swept_boxes, objects, light_shapes })
+        let screen = new_bounds.iter().map(|b| film_rect(&scene.camera, b)).collect();
+        let width = scene.camera.width as usize;
+        Ok(Moved {
+            now,
+            new_bounds,
+            old_bounds,
+            new_boxes,
+            old_boxes,
+            swept_boxes,
+            objects,
+            light_shapes,
+            screen,
+            width,
+        })
+    }
+
+    /// May the camera ray through pixel `pixel` (row-major, any point of it) meet a moved
+    /// surface where it is now?
+    pub fn may_show(&self, pixel: usize) -> bool {
+        let Some(rects) = &self.screen else { return true };
+        let (x, y) = ((pixel % self.width) as f32, (pixel / self.width) as f32);
+        rects.iter().any(|r| x + 1.0 >= r[0] && x <= r[2] && y + 1.0 >= r[1] && y <= r[3])
     }
 
     /// May a moved surface lie on the segment of `ray`, where it is now or where it was? (A
@@ -212,6 +238,23 @@ impl Moved {
     pub fn on_ray(&self, ray: &Ray) -> bool {
         self.swept_boxes.hits(ray.origin, ray.dir, ray.tfar).0
     }
+}
+
+/// The film rectangle a box projects into, widened by a pixel; `None` when a corner is not in
+/// front of the camera. A pinhole's projection of a box in front of it lies in the hull of its
+/// corners' projections.
+fn film_rect(camera: &Camera, b: &Aabb) -> Option<[f32; 4]> {
+    let mut r = [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
+    for k in 0..8 {
+        let corner = Vec3::new(
+            if k & 1 == 0 { b.min.x } else { b.max.x },
+            if k & 2 == 0 { b.min.y } else { b.max.y },
+            if k & 4 == 0 { b.min.z } else { b.max.z },
+        );
+        let (x, y) = camera.film_point(corner)?;
+        r = [r[0].min(x - 1.0), r[1].min(y - 1.0), r[2].max(x + 1.0), r[3].max(y + 1.0)];
+    }
+    Some(r)
 }
 
 impl TickChanges {
