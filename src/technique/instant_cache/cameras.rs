@@ -7,8 +7,10 @@
 //! when it met no emission and no mirror or glass (its ray ends at its diffuse hit, or leaves
 //! the scene, or meets a light's back side: a miss is kept only while no light's shape moved),
 //! its hit is not on a moved object, and no moved surface now lies on its ray
-//! before the hit: the ray is tested against the moved surfaces' new bounds, and where it
-//! touches one, traced against those surfaces alone where they are now (`temporal::Moved`).
+//! before the hit: a pixel outside the film rectangles the moved surfaces' new bounds project
+//! to needs no test; elsewhere the ray is tested against those bounds, and where it touches
+//! one, traced against those surfaces alone where they are now (`temporal::Moved`). A sample's
+//! sub-pixel point and stream are made only when needed.
 //!
 //! Direct light is kept too, when a fresh sample would draw the same: `temporal`'s resident
 //! passes draw from a stream of the pixel and the pass since the last change (not of the tick),
