@@ -294,8 +294,9 @@ impl InstantCache {
     /// Indirect irradiance per pixel from the cache (`pixels.rs`): samples keep their records
     /// or clear them; in pixel order, samples no record covers get a new one; samples that
     /// cleared their list or that new records reach look up; new and flagged records are
-    /// computed in parallel; each sample interpolates its records. `renumbering`: how record indices changed since the
-    /// last tick's passes.
+    /// computed in parallel; each sample interpolates its records. `kept`: per sample, its
+    /// camera sample was kept (`cameras.rs`). `renumbering`: how record indices changed since
+    /// the last tick's passes.
     fn cached_indirect(
         &mut self,
         ctx: &RenderContext,

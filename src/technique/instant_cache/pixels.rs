@@ -5,10 +5,9 @@
 //! placed) only when it must: its hit changed, one of its records went (`Cache::retain`
 //! reports the renumbering), or a record made this tick may reach it (a cell grid of this
 //! tick's new records says so; cells are at least the records' reach wide, so the 27 cells
-//! around a new record hold every point it reaches). Otherwise it
-//! keeps its list, and only the weighted sum is redone, since re-evaluation may have changed
-//! the records' irradiance. On a still tick (nothing in the scene changed) even the sum is
-//! kept.
+//! around a new record hold every point it reaches). Otherwise it keeps its list, and only the
+//! weighted sum is redone, since re-evaluation may have changed the records' irradiance. On a
+//! still tick (nothing in the scene changed) even the sum is kept.
 //!
 //! Lists are in record-index order and sums run in that order. Records that stay keep their
 //! relative order when others go, so a kept list sums to the same bits a fresh lookup would.
@@ -70,8 +69,9 @@ pub fn all_kept(states: &[SampleState], kept: &[bool]) -> Option<Vec<Option<Rgb>
 /// Step 1 of a pass: each sample keeps its list (`keep`, its camera sample `kept` so its hit is
 /// the one its state holds, a list that is not empty, no record of it gone) or clears it, to
 /// look the cache up in step 3 after the new records are placed. Only the hits of samples
-/// that do not keep their list are asked for (`hit`, by sample index). Returns per sample whether it cleared its list and has a
-/// hit: step 2 tests those samples' coverage, and step 3 looks them up.
+/// that do not keep their list are asked for (`hit`, by sample index). Returns per sample
+/// whether it cleared its list and has a hit: step 2 tests those samples' coverage, and step
+/// 3 looks them up.
 pub fn keep_lists(
     states: &mut [SampleState],
     (hit, kept): (impl Fn(usize) -> Option<HitKey> + Sync, &[bool]),

@@ -241,8 +241,8 @@ impl Moved {
 }
 
 /// The film rectangle a box projects into, widened by a pixel; `None` when a corner is not in
-/// front of the camera. A pinhole's projection of a box in front of it lies in the hull of its
-/// corners' projections.
+/// front of the camera or a coordinate is not finite. A pinhole's projection of a box in front
+/// of it lies in the hull of its corners' projections.
 fn film_rect(camera: &Camera, b: &Aabb) -> Option<[f32; 4]> {
     let mut r = [f32::INFINITY, f32::INFINITY, f32::NEG_INFINITY, f32::NEG_INFINITY];
     for k in 0..8 {
@@ -251,7 +251,7 @@ fn film_rect(camera: &Camera, b: &Aabb) -> Option<[f32; 4]> {
             if k & 2 == 0 { b.min.y } else { b.max.y },
             if k & 4 == 0 { b.min.z } else { b.max.z },
         );
-        let (x, y) = camera.film_point(corner)?;
+        let (x, y) = camera.film_point(corner).filter(|(x, y)| x.is_finite() && y.is_finite())?;
         r = [r[0].min(x - 1.0), r[1].min(y - 1.0), r[2].max(x + 1.0), r[3].max(y + 1.0)];
     }
     Some(r)
