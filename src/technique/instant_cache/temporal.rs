@@ -464,3 +464,44 @@ impl Cones {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_box_in_front_of_the_camera_projects_inside_its_film_rectangle() {
+        // Property: every point of a box in front of the camera crosses the film inside the
+        // box's rectangle with a pixel to spare, so the camera ray through any point of a pixel
+        // outside the rectangle misses the box; a box reaching behind the camera has none.
+        // Negative control, by hand: dropping the pixel of margin fails the margin assertion.
+        let camera = Camera {
+            position: Vec3::new(0.3, 1.0, 4.0),
+            forward: Vec3::NEG_Z,
+            right: Vec3::X,
+            up: Vec3::Y,
+            tan_half_vfov: 0.5,
+            width: 64,
+            height: 48,
+        };
+        let mut rng = crate::core::Rng::new(5, 6);
+        let mut u = |lo: f32, hi: f32| lo + (hi - lo) * rng.next_f32();
+        let mut behind = 0;
+        for _ in 0..200 {
+            let min = Vec3::new(u(-3.0, 3.0), u(-2.0, 3.0), u(-6.0, 4.0));
+            let b = Aabb { min, max: min + Vec3::new(u(0.0, 1.5), u(0.0, 1.5), u(0.0, 1.5)) };
+            let Some(r) = film_rect(&camera, &b) else {
+                assert!(b.max.z >= camera.position.z, "{b:?} lies in front of the camera but has no rectangle");
+                behind += 1;
+                continue;
+            };
+            for _ in 0..50 {
+                let p = Vec3::new(u(b.min.x, b.max.x), u(b.min.y, b.max.y), u(b.min.z, b.max.z));
+                let (x, y) = camera.film_point(p).expect("a point of a box in front is in front");
+                let inside = x - 1.0 >= r[0] && x + 1.0 <= r[2] && y - 1.0 >= r[1] && y + 1.0 <= r[3];
+                assert!(inside, "{p:?} crosses the film at ({x}, {y}), outside {r:?} less a pixel");
+            }
+        }
+        assert!((10..150).contains(&behind), "{behind} of 200 boxes reached behind the camera");
+    }
+}
