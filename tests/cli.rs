@@ -246,6 +246,59 @@ fn bench_reuse_reports_each_mode_with_the_named_fields() {
 }
 
 #[test]
+fn bench_icache_runs_the_modes_asked_and_splits_the_tick_by_stage() {
+    // Property: `--modes` picks the modes and their order (a repeat runs once), and each frame's
+    // new-record time is a part of its indirect pixel time (it is timed inside it), zero for
+    // `igi`, which makes no records. Negative controls, by hand: ignoring `--modes` runs all four
+    // modes; timing records around the whole pass makes `records_ms` exceed `indirect_ms`.
+    let json = out_dir("icache").join("icache.json");
+    let out = relume()
+        .args([
+            "bench",
+            "icache",
+            scene("bunnies-1.json").to_str().unwrap(),
+            "--anim",
+            scene("bunnies-1.anim.json").to_str().unwrap(),
+        ])
+        .args(["--frames", "4", "--vpls", "32", "--width", "24", "--height", "24", "--threads", "1"])
+        .args(["--modes", "temporal,igi,temporal", "--json"])
+        .arg(&json)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let modes = v["modes"].as_array().unwrap();
+    assert_eq!(modes.iter().map(|m| m["mode"].as_str().unwrap()).collect::<Vec<_>>(), ["temporal", "igi"]);
+    for m in modes {
+        for f in m["frames"].as_array().unwrap() {
+            let ms = |key: &str| f["stats"][key].as_f64().unwrap_or_else(|| panic!("stats.{key}"));
+            assert!(
+                ms("records_ms") <= ms("indirect_ms"),
+                "{}: records {} > pixels {}",
+                m["mode"],
+                ms("records_ms"),
+                ms("indirect_ms")
+            );
+            assert!(ms("camera_ms") > 0.0, "{}: no camera time", m["mode"]);
+            if m["mode"] == "igi" {
+                assert_eq!(ms("records_ms"), 0.0, "igi makes no records");
+            }
+        }
+        for key in ["camera", "vpls", "invalidate", "pixels", "records"] {
+            assert!(m["summary"]["stage_ms_median"][key].is_f64(), "stage_ms_median.{key}");
+        }
+    }
+    let bad = relume()
+        .args(["bench", "icache", scene("bunnies-1.json").to_str().unwrap(), "--anim"])
+        .arg(scene("bunnies-1.anim.json"))
+        .args(["--modes", "temporal,fast"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("temporal-on-demand"), "the error lists the modes");
+}
+
+#[test]
 fn bench_error_judges_a_caustic_against_bdpt_references() {
     // Property: `path` cannot render the point light's caustic in caustic-ball, so against a
     // `--reference bdpt` its image is too dark by the caustic's share, while bdpt's own frames

@@ -2,10 +2,11 @@
 //! the same seed and VPL set, as in Debattista et al.'s Tables 3 and 4.
 //!
 //! Runs `igi`, `static`, `temporal` (immediate re-evaluation) and `temporal` with on-demand
-//! re-evaluation, each in a fresh session over F frames. Frame 0 builds everything and is
-//! reported apart as `initial`; frames 1.. are summarised by median and p95. The indirect
-//! component is VPL shooting, invalidation and the cache (or IGI's gather and filter): what the
-//! paper's Table 4 times. `--audit` recomputes every record after each frame and reports the
+//! re-evaluation (or those `--modes` names), each in a fresh session over F frames. Frame 0
+//! builds everything and is reported apart as `initial`; frames 1.. are summarised by median
+//! and p95. The indirect component is VPL shooting, invalidation and the cache (or IGI's gather
+//! and filter): what the paper's Table 4 times. The tick is also split by stage: camera samples
+//! and direct light, then the indirect stages, with the time spent computing records apart. `--audit` recomputes every record after each frame and reports the
 //! records that differ from a fresh computation (it should be 0; it slows the run down).
 use super::{progress_bar, quantile, AnimationArgs};
 use crate::technique::instant_cache::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation};
@@ -29,6 +30,37 @@ pub struct IcacheArgs {
     /// Check every record against a fresh computation after each frame (slow).
     #[arg(long)]
     pub audit: bool,
+    /// The modes to run, comma-separated (default: all four; the ratios need `igi` and
+    /// `static`).
+    #[arg(long, value_delimiter = ',', default_values_t = [Mode::Igi, Mode::Static, Mode::Temporal, Mode::TemporalOnDemand])]
+    pub modes: Vec<Mode>,
+}
+
+/// A configuration `bench icache` compares.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Mode {
+    Igi,
+    Static,
+    Temporal,
+    /// `temporal` with on-demand re-evaluation.
+    TemporalOnDemand,
+}
+
+impl Mode {
+    fn label(self) -> &'static str {
+        match self {
+            Mode::Igi => "igi",
+            Mode::Static => "static",
+            Mode::Temporal => "temporal",
+            Mode::TemporalOnDemand => "temporal-on-demand",
+        }
+    }
+}
+
+impl std::fmt::Display for Mode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.label())
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -49,9 +81,11 @@ pub struct Summary {
     pub tick_ms_p95: f64,
     pub indirect_ms_median: f64,
     pub indirect_ms_p95: f64,
-    /// The indirect time by stage (medians of `vpl_ms`, `invalidate_ms` and `indirect_ms`):
-    /// shooting VPLs, the start-of-tick invalidation (`temporal`'s ageing, case 5 and immediate
-    /// re-evaluation), and the cache's or the gather's work for the pixels.
+    /// The tick by stage (medians of `camera_ms`, `vpl_ms`, `invalidate_ms`, `indirect_ms` and
+    /// `records_ms`): camera samples and direct light, then the indirect component: shooting
+    /// VPLs, the start-of-tick invalidation (`temporal`'s ageing, case 5 and immediate
+    /// re-evaluation), and the cache's or the gather's work for the pixels, of which computing
+    /// records is a part.
     pub stage_ms_median: StageSplit,
     pub rays_median: f64,
     pub visibility_rays_median: f64,
@@ -69,9 +103,11 @@ pub struct Summary {
 
 #[derive(Debug, Serialize)]
 pub struct StageSplit {
+    pub camera: f64,
     pub vpls: f64,
     pub invalidate: f64,
     pub pixels: f64,
+    pub records: f64,
 }
 
 #[derive(Debug, Serialize)]
@@ -93,21 +129,27 @@ pub struct IcacheReport {
     pub modes: Vec<ModeReport>,
 }
 
-/// The configurations compared, by label.
+/// The configurations compared, by label, in the order asked.
 fn configurations(args: &IcacheArgs) -> Vec<(&'static str, InstantCacheConfig)> {
     let defaults = InstantCacheConfig::default();
     let normal_tolerance = args.normal_tolerance.unwrap_or(defaults.normal_tolerance);
     let refine_ticks = args.refine_ticks.unwrap_or(defaults.refine_ticks);
     let base = InstantCacheConfig { vpls: args.vpls, audit: args.audit, normal_tolerance, refine_ticks, ..defaults };
-    vec![
-        ("igi", InstantCacheConfig { mode: CacheMode::Igi, audit: false, ..base.clone() }),
-        ("static", InstantCacheConfig { mode: CacheMode::Static, ..base.clone() }),
-        ("temporal", InstantCacheConfig { mode: CacheMode::Temporal, ..base.clone() }),
-        (
-            "temporal-on-demand",
-            InstantCacheConfig { mode: CacheMode::Temporal, reevaluation: Reevaluation::OnDemand, ..base },
-        ),
-    ]
+    let config = |mode: Mode| match mode {
+        Mode::Igi => InstantCacheConfig { mode: CacheMode::Igi, audit: false, ..base.clone() },
+        Mode::Static => InstantCacheConfig { mode: CacheMode::Static, ..base.clone() },
+        Mode::Temporal => InstantCacheConfig { mode: CacheMode::Temporal, ..base.clone() },
+        Mode::TemporalOnDemand => {
+            InstantCacheConfig { mode: CacheMode::Temporal, reevaluation: Reevaluation::OnDemand, ..base.clone() }
+        }
+    };
+    let mut modes: Vec<Mode> = Vec::new();
+    for &m in &args.modes {
+        if !modes.contains(&m) {
+            modes.push(m);
+        }
+    }
+    modes.into_iter().map(|m| (m.label(), config(m))).collect()
 }
 
 pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
@@ -146,9 +188,11 @@ pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
             indirect_ms_median: quantile(&indirect, 0.5),
             indirect_ms_p95: quantile(&indirect, 0.95),
             stage_ms_median: StageSplit {
+                camera: quantile(&col(&|f| f.stats.camera_ms), 0.5),
                 vpls: quantile(&col(&|f| f.stats.vpl_ms), 0.5),
                 invalidate: quantile(&col(&|f| f.stats.invalidate_ms), 0.5),
                 pixels: quantile(&col(&|f| f.stats.indirect_ms), 0.5),
+                records: quantile(&col(&|f| f.stats.records_ms), 0.5),
             },
             rays_median: quantile(&col(&|f| f.rays as f64), 0.5),
             visibility_rays_median: quantile(&col(&|f| f.visibility_rays as f64), 0.5),
@@ -196,10 +240,13 @@ pub fn print_table(r: &IcacheReport, audit: bool) {
             s.memory_bytes as f64 / 1048576.0
         );
     }
-    println!("  indirect ms by stage (medians)  shoot VPLs  invalidate  pixels");
+    println!("  ms by stage (medians)   camera | indirect: shoot VPLs  invalidate  pixels (of which records)");
     for m in &r.modes {
         let st = &m.summary.stage_ms_median;
-        println!("  {:<30} {:>11.2} {:>11.2} {:>7.2}", m.mode, st.vpls, st.invalidate, st.pixels);
+        println!(
+            "  {:<21} {:>8.2} | {:>20.2} {:>11.2} {:>7.2} {:>17.2}",
+            m.mode, st.camera, st.vpls, st.invalidate, st.pixels, st.records
+        );
     }
     for m in r.modes.iter().filter(|m| m.summary.resting_frames > 0) {
         println!(

@@ -236,6 +236,12 @@ pub struct InstantCacheStats {
     /// The indirect component: record creation, on-demand re-evaluation and interpolation, or
     /// the IGI gather and filter.
     pub indirect_ms: f64,
+    /// The part of `indirect_ms` spent computing new records and re-evaluating flagged ones.
+    #[serde(default)]
+    pub records_ms: f64,
+    /// Camera samples and their direct light (traced, or kept by `temporal`); not indirect.
+    #[serde(default)]
+    pub camera_ms: f64,
     pub render_ms: f64,
     /// `vpls` and `cache` (records, their contributions and the grid).
     pub memory: crate::technique::ResidentMemory,

@@ -336,7 +336,9 @@ impl InstantCache {
         let cells = pixels::NewRecords::new(extent.lo, extent.hi, cache.reach());
         let (new, coverage_tests) = pixels::place_records(cache, &states, &needs, ctx.tick, cells);
         let looked = pixels::look_up(cache, &mut states, &needs, &new);
+        let t = Instant::now();
         let works = compute_records(ctx, cache, &self.vpls, self.changes.as_ref(), first_new, &states, min_distance);
+        self.pending.records_ms += t.elapsed().as_secs_f64() * 1e3;
         let looked_up = looked.iter().filter(|&&l| l).count() as u64;
         let lookups = looked_up + coverage_tests;
         let out = pixels::interpolate_all(&cache.records, &mut states, &looked, still);
@@ -395,8 +397,10 @@ impl InstantCache {
                 _ => None,
             };
             let stream = (self.passes, pass_in_tick as u64);
+            let t = Instant::now();
             let cameras::Shading { counts, kept } =
                 cameras::shade(ctx, mode, stream, &mut shaded, reuse, self.config.audit);
+            self.pending.camera_ms += t.elapsed().as_secs_f64() * 1e3;
             self.pending.camera_samples_kept += counts.kept;
             self.pending.direct_samples_kept += counts.direct_kept;
             self.pending.audit_cameras_mismatched += counts.mismatched;
