@@ -421,30 +421,9 @@ impl InstantCache {
             if self.config.audit {
                 self.audit(ctx);
             }
-            let radiance: Vec<Rgb> = shaded
-                .iter()
-                .zip(&indirect)
-                .map(|(s, e)| {
-                    let reflected = match (&s.sample.hit, e) {
-                        (Some(hit), Some(e)) => hit.beta * hit.material(scene).diffuse_reflectance() * *e * FRAC_1_PI,
-                        _ => Rgb::BLACK,
-                    };
-                    s.sample.emitted + s.direct + reflected
-                })
-                .collect();
             self.pending.camera_rays += shaded.len() as u64 - counts.kept;
-            self.pending.specular_rays += shaded.iter().map(|s| s.sample.specular_rays).sum::<u64>();
+            self.pending.specular_rays += accumulate(film, scene, &shaded, &indirect);
             self.pending.shadow_rays += counts.shadow_rays;
-            film.accumulate_chunks(
-                scene.camera.width as usize,
-                |first, chunk| {
-                    for (k, px) in chunk.iter_mut().enumerate() {
-                        px.add(radiance[first + k]);
-                        px.count += 1.0;
-                    }
-                },
-                |(), ()| (),
-            );
             if resident {
                 self.cameras.resize_with(self.config.spp as usize, Vec::new);
                 self.cameras[pass_in_tick] = shaded;
@@ -457,6 +436,29 @@ impl InstantCache {
         let bytes = self.cameras.iter().map(|c| c.capacity() * size_of::<Shaded>()).sum::<usize>();
         self.pending.memory.set("cameras", bytes as u64);
     }
+}
+
+/// Adds each sample's radiance (the emission along its chain, its direct light and ρ/π times
+/// its indirect irradiance) to its pixel, in parallel rows, and returns the specular rays the
+/// samples' chains traced.
+fn accumulate(film: &mut Film, scene: &Scene, shaded: &[Shaded], indirect: &[Option<Rgb>]) -> u64 {
+    film.accumulate_chunks(
+        scene.camera.width as usize,
+        |first, chunk| {
+            let mut specular = 0;
+            for ((px, s), e) in chunk.iter_mut().zip(&shaded[first..]).zip(&indirect[first..]) {
+                let reflected = match (&s.sample.hit, e) {
+                    (Some(hit), Some(e)) => hit.beta * hit.material(scene).diffuse_reflectance() * *e * FRAC_1_PI,
+                    _ => Rgb::BLACK,
+                };
+                px.add(s.sample.emitted + s.direct + reflected);
+                px.count += 1.0;
+                specular += s.sample.specular_rays;
+            }
+            specular
+        },
+        |a, b| a + b,
+    )
 }
 
 /// Computes the records made this pass (from `first_new` on) and re-evaluates flagged
