@@ -51,11 +51,16 @@ fn look_up_at(cache: &Cache, hit: HitKey, weights: &mut Vec<(u32, f32)>) {
     weights.sort_unstable_by_key(|e| e.0);
 }
 
-/// Follows `renumbering` in place; false if one of the records went.
+/// Follows `renumbering` in place; false if one of the records went. An index that stays is
+/// not written: records mostly go from the end (this tick's records on moved objects), so most
+/// lists keep their indices, and their memory is then only read.
 fn renumber(weights: &mut [(u32, f32)], renumbering: &[u32]) -> bool {
     weights.iter_mut().all(|(i, _)| {
-        *i = renumbering.get(*i as usize).copied().unwrap_or(GONE);
-        *i != GONE
+        let now = renumbering.get(*i as usize).copied().unwrap_or(GONE);
+        if now != *i {
+            *i = now;
+        }
+        now != GONE
     })
 }
 
@@ -199,7 +204,7 @@ pub struct Interpolated {
 /// did not look up (`looked`), else interpolated.
 pub fn interpolate_all(records: &[Record], states: &mut [SampleState], looked: &[bool], still: bool) -> Interpolated {
     let flags = AtomicFlags::new(records.len());
-    let out: Vec<(Option<Rgb>, bool)> = states
+    let (indirect, kept): (Vec<Option<Rgb>>, Vec<bool>) = states
         .par_iter_mut()
         .zip(looked)
         .map(|(state, &looked)| {
@@ -213,9 +218,10 @@ pub fn interpolate_all(records: &[Record], states: &mut [SampleState], looked: &
             }
             (state.indirect, keep)
         })
-        .collect();
-    let (hits, kept) = out.iter().fold((0, 0), |(h, k), o| (h + u64::from(o.0.is_some()), k + u64::from(o.1)));
-    Interpolated { indirect: out.into_iter().map(|o| o.0).collect(), hits, kept, used: flags.into_vec() }
+        .unzip();
+    let hits = indirect.par_iter().filter(|e| e.is_some()).count() as u64;
+    let kept = kept.par_iter().filter(|&&k| k).count() as u64;
+    Interpolated { indirect, hits, kept, used: flags.into_vec() }
 }
 
 /// The records some sample's list holds, as flags by index.
