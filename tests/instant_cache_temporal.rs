@@ -223,11 +223,12 @@ fn a_static_scene_settles_to_no_work() {
 #[test]
 fn a_moved_object_makes_only_the_samples_it_changed_look_up() {
     // Property: when the slab shifts, the samples that look the cache up are those whose hit
-    // or records changed (the audit counts them: `audit_samples_needed`), give or take the
-    // new-record cells' slack (bounded below), and every other sample keeps its records with
+    // or records changed (the audit counts them: `audit_samples_needed`), plus at most those
+    // whose camera sample was traced again, and every other sample keeps its records with
     // lists a fresh lookup confirms (`assert_exact`). The slab covers a minority of the view,
     // so this is far from every sample; the code before per-sample keeping looked up all 576
-    // (checked), which fails the bound.
+    // (checked), and the code that looked up every sample near a new record's cells (stop 42)
+    // fails the bound too (checked).
     let device = Device::new(2).unwrap();
     let pool = thread_pool(2).unwrap();
     pool.install(|| {
@@ -241,9 +242,10 @@ fn a_moved_object_makes_only_the_samples_it_changed_look_up() {
             assert_exact(&label, &moved);
             assert!(moved.records_removed_moved > 0 && moved.audit_samples_needed > 0, "{label}: {moved:?}");
             assert!(moved.samples_looked_up >= moved.audit_samples_needed, "{label}: {moved:?}");
-            // A new record marks 3 cells per axis, each under two reaches wide: on a surface at
-            // most (6r)² against the πr² it reaches, about 11.5 times the samples it can change.
-            assert!(moved.samples_looked_up <= 12 * moved.audit_samples_needed, "{label}: too many: {moved:?}");
+            // A sample looks up beyond need only if its camera sample was traced again and found
+            // its old hit and records: one near a new record that none reaches does not.
+            let traced = 24 * 24 - moved.camera_samples_kept;
+            assert!(moved.samples_looked_up <= moved.audit_samples_needed + traced, "{label}: too many: {moved:?}");
             assert!(moved.samples_looked_up < 24 * 24 / 2, "{label}: {moved:?}");
         }
     });

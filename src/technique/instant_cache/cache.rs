@@ -184,15 +184,22 @@ impl Cache {
     /// `f` returns false. A record farther than a·D cannot qualify, so the square roots wait
     /// for the distance test. Returns false if `f` stopped it.
     fn visit(&self, p: Vec3, n: Vec3, mut f: impl FnMut(u32, f32) -> bool) -> bool {
+        self.grid
+            .query(p, self.reach, |key| self.weight(p, n, key.position, key.normal).is_none_or(|w| f(key.index, w)))
+    }
+
+    /// The weight w_k(x) at `p` (unit normal `n`) of a record at `position` with `normal`, if
+    /// it is above 1.
+    pub fn weight(&self, p: Vec3, n: Vec3, position: Vec3, normal: Vec3) -> Option<f32> {
         let reach = self.reach;
-        self.grid.query(p, reach, |key| {
-            let d2 = (p - key.position).length_squared();
-            if d2 >= reach * reach {
-                return true;
-            }
-            let inverse = d2.sqrt() / reach + (1.0 - n.dot(key.normal)).max(0.0).sqrt() * self.normal_scale;
-            inverse >= 1.0 || f(key.index, 1.0 / inverse.max(1e-12))
-        })
+        let d2 = (p - position).length_squared();
+        if d2 >= reach * reach {
+            return None;
+        }
+        let inverse = d2.sqrt() / reach + (1.0 - n.dot(normal)).max(0.0).sqrt() * self.normal_scale;
+        // A NaN weighs in, as it always has (a NaN hit is seen, not dropped).
+        let below_one = inverse.partial_cmp(&1.0).is_none_or(|o| o == std::cmp::Ordering::Less);
+        below_one.then(|| 1.0 / inverse.max(1e-12))
     }
 
     /// How far a record reaches: a·D, in scene units.

@@ -2,12 +2,13 @@
 //! diffuse hit x and their weights, which `temporal` keeps from tick to tick.
 //!
 //! A sample looks the cache up (one grid query, once a pass, after the pass's new records are
-//! placed) only when it must: its hit changed, one of its records went (`Cache::retain`
-//! reports the renumbering), or a record made this tick may reach it (a cell grid of this
-//! tick's new records says so; cells are at least the records' reach wide, so the 27 cells
-//! around a new record hold every point it reaches). Otherwise it keeps its list, and only the
-//! weighted sum is redone, since re-evaluation may have changed the records' irradiance. On a
-//! still tick (nothing in the scene changed) even the sum is kept.
+//! placed) only when it must: its hit changed or one of its records went (`Cache::retain`
+//! reports the renumbering). Otherwise it keeps its list. If a record made this pass may reach
+//! it (a cell grid of the pass's new records says so; cells are at least the records' reach
+//! wide, so the 27 cells around a new record hold every point it reaches), it asks the new
+//! records alone and appends those with w > 1: they have the highest indices, so the list stays
+//! in index order. Only the weighted sum is redone, since re-evaluation may have changed the
+//! records' irradiance. On a still tick (nothing in the scene changed) even the sum is kept.
 //!
 //! Lists are in record-index order and sums run in that order. Records that stay keep their
 //! relative order when others go, so a kept list sums to the same bits a fresh lookup would.
@@ -15,7 +16,7 @@
 //! Invariant (audited with `audit: true`, stat `audit_samples_mismatched`): every sample's list
 //! equals, bit for bit, what a fresh lookup of the cache gives at its hit.
 use super::cache::{Cache, Record, GONE};
-use super::grid::Cells;
+use super::grid::{Cells, RecordGrid};
 use crate::core::Rgb;
 use crate::technique::camera_chain::CameraSample;
 use glam::Vec3;
@@ -105,17 +106,22 @@ pub fn keep_lists(
 pub struct NewRecords {
     cells: Cells,
     marked: Vec<bool>,
+    /// The new records' indices by position.
+    records: RecordGrid<u32>,
+    reach: f32,
     pub count: u64,
 }
 
 impl NewRecords {
     pub fn new(lo: Vec3, hi: Vec3, reach: f32) -> NewRecords {
         let cells = Cells::new(lo, hi, reach);
-        NewRecords { marked: vec![false; cells.len()], cells, count: 0 }
+        let records = RecordGrid::new(lo, hi, reach);
+        NewRecords { marked: vec![false; cells.len()], cells, records, reach, count: 0 }
     }
 
-    /// Marks the cells a record at `p` may reach.
-    fn mark(&mut self, p: Vec3) {
+    /// Marks the cells the record `index` at `p` may reach.
+    fn mark(&mut self, index: u32, p: Vec3) {
+        self.records.insert(index, p);
         self.count += 1;
         let c = self.cells.cell_of(p);
         for dz in -1..=1 {
@@ -135,6 +141,22 @@ impl NewRecords {
     pub fn near(&self, p: Vec3) -> bool {
         self.count > 0 && self.marked[self.cells.index(self.cells.cell_of(p))]
     }
+
+    /// Appends to `weights` the new records with w > 1 at `hit`, by index. A kept list holds
+    /// only older records (lower indices), so the list stays in index order and equals a
+    /// fresh lookup. Returns whether any was appended.
+    fn append_to(&self, cache: &Cache, hit: HitKey, weights: &mut Vec<(u32, f32)>) -> bool {
+        let start = weights.len();
+        self.records.query(hit.0, self.reach, |&i| {
+            let r = &cache.records[i as usize];
+            if let Some(w) = cache.weight(hit.0, hit.1, r.position, r.normal) {
+                weights.push((i, w));
+            }
+            true
+        });
+        weights[start..].sort_unstable_by_key(|e| e.0);
+        weights.len() > start
+    }
 }
 
 /// Step 2, in sample order (so the image does not depend on the thread count): a sample that
@@ -153,24 +175,26 @@ pub fn place_records(
         let Some((p, n, object)) = state.hit else { continue };
         tests += 1;
         if !cache.covers(p, n) {
-            cache.insert(Record::new(p, n, object, Vec::new(), tick));
-            new.mark(p);
+            let index = cache.insert(Record::new(p, n, object, Vec::new(), tick));
+            new.mark(index, p);
         }
     }
     (new, tests)
 }
 
-/// Step 3: samples that must (`needs`, from step 1) or that a new record may reach look the
-/// cache up. Returns per sample whether it did.
+/// Step 3: samples that must (`needs`, from step 1) look the cache up; samples that kept their
+/// list and that a new record may reach add the new records that reach them (a query of the
+/// new records alone). Returns per sample whether its list changed or was looked up.
 pub fn look_up(cache: &Cache, states: &mut [SampleState], needs: &[bool], new: &NewRecords) -> Vec<bool> {
     states
         .par_iter_mut()
         .zip(needs)
         .map(|(state, &needs)| match state.hit {
-            Some(h) if needs || new.near(h.0) => {
+            Some(h) if needs => {
                 look_up_at(cache, h, &mut state.weights);
                 true
             }
+            Some(h) if new.near(h.0) => new.append_to(cache, h, &mut state.weights),
             _ => false,
         })
         .collect()
@@ -379,7 +403,7 @@ mod tests {
             // One record, mostly inside the grid, and points around it out to its reach.
             let mut new = NewRecords::new(Vec3::ZERO, Vec3::new(1.0, 0.7, 2.0), reach);
             let record = u() * Vec3::new(1.2, 0.9, 2.2) - 0.1;
-            new.mark(record);
+            new.mark(0, record);
             for _ in 0..200 {
                 let p = record + (u() * 2.0 - Vec3::ONE) * reach;
                 if (record - p).length() <= reach {
