@@ -6,8 +6,9 @@
 //! builds everything and is reported apart as `initial`; frames 1.. are summarised by median
 //! and p95. The indirect component is VPL shooting, invalidation and the cache (or IGI's gather
 //! and filter): what the paper's Table 4 times. The tick is also split by stage: camera samples
-//! and direct light, then the indirect stages, with the time spent computing records apart. `--audit` recomputes every record after each frame and reports the
-//! records that differ from a fresh computation (it should be 0; it slows the run down).
+//! and direct light, then the indirect stages, with the time spent computing records apart.
+//! `--audit` recomputes every record after each frame and reports the records that differ from
+//! a fresh computation (it should be 0; it slows the run down).
 use super::{progress_bar, quantile, AnimationArgs};
 use crate::technique::instant_cache::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation};
 use crate::technique::{TechniqueConfig, TechniqueStats};
@@ -32,7 +33,7 @@ pub struct IcacheArgs {
     pub audit: bool,
     /// The modes to run, comma-separated (default: all four; the ratios need `igi` and
     /// `static`).
-    #[arg(long, value_delimiter = ',', default_values_t = [Mode::Igi, Mode::Static, Mode::Temporal, Mode::TemporalOnDemand])]
+    #[arg(long, value_delimiter = ',', default_values_t = Mode::ALL)]
     pub modes: Vec<Mode>,
 }
 
@@ -47,6 +48,8 @@ pub enum Mode {
 }
 
 impl Mode {
+    const ALL: [Mode; 4] = [Mode::Igi, Mode::Static, Mode::Temporal, Mode::TemporalOnDemand];
+
     fn label(self) -> &'static str {
         match self {
             Mode::Igi => "igi",

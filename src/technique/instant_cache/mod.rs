@@ -34,9 +34,9 @@
 //!      samples use the same sub-pixel points every tick (the k-th of a tick's `spp`), so a
 //!      still view makes no records after its first tick (its direct light is drawn anew). Each
 //!      sample keeps its records and weights (`pixels.rs`): it looks the cache up again only
-//!      if its hit changed, one of its records went, or a record made this tick may reach
-//!      it; otherwise it only re-sums, and on a still tick (no scene change at all) it keeps
-//!      last tick's irradiance. VPLs are shot again only when geometry, a light or a
+//!      if its hit changed or one of its records went, and adds this tick's new records that
+//!      reach it; otherwise it only re-sums, and on a still tick (no scene change at all) it
+//!      keeps last tick's irradiance. VPLs are shot again only when geometry, a light or a
 //!      material changed.
 //! 4. Radiance = emission seen along the chain + direct + ρ/π · indirect irradiance.
 //! 5. Refinement (every mode): a still tick (nothing changed) renders the next VPL generation
