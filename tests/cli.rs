@@ -208,23 +208,27 @@ fn bench_rays_reports_rates_and_regeneration_rows() {
     assert!(rho("dark") < rho("normal") && rho("normal") < rho("bright"));
 }
 
-#[test]
-fn bench_reuse_reports_each_mode_with_the_named_fields() {
-    let json = out_dir("reuse").join("reuse.json");
+/// Runs `relume bench <bench>` on bunnies-1 and its animation with `args`, and returns its JSON.
+fn bench_bunnies(bench: &str, args: &[&str]) -> serde_json::Value {
+    let json = out_dir(bench).join(format!("{bench}.json"));
     let out = relume()
-        .args([
-            "bench",
-            "reuse",
-            scene("bunnies-1.json").to_str().unwrap(),
-            "--anim",
-            scene("bunnies-1.anim.json").to_str().unwrap(),
-        ])
-        .args(["--frames", "4", "--paths", "4000", "--width", "16", "--height", "16", "--threads", "1", "--json"])
+        .args(["bench", bench, scene("bunnies-1.json").to_str().unwrap(), "--anim"])
+        .arg(scene("bunnies-1.anim.json"))
+        .args(args)
+        .arg("--json")
         .arg(&json)
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap()
+}
+
+#[test]
+fn bench_reuse_reports_each_mode_with_the_named_fields() {
+    let v = bench_bunnies(
+        "reuse",
+        &["--frames", "4", "--paths", "4000", "--width", "16", "--height", "16", "--threads", "1"],
+    );
     let modes = v["modes"].as_array().unwrap();
     assert_eq!(modes.iter().map(|m| m["mode"].as_str().unwrap()).collect::<Vec<_>>(), ["off", "naive", "error"]);
     for m in modes {
@@ -251,22 +255,8 @@ fn bench_icache_runs_the_modes_asked_and_splits_the_tick_by_stage() {
     // new-record time is a part of its indirect pixel time (it is timed inside it), zero for
     // `igi`, which makes no records. Negative controls, by hand: ignoring `--modes` runs all four
     // modes; timing records around the whole pass makes `records_ms` exceed `indirect_ms`.
-    let json = out_dir("icache").join("icache.json");
-    let out = relume()
-        .args([
-            "bench",
-            "icache",
-            scene("bunnies-1.json").to_str().unwrap(),
-            "--anim",
-            scene("bunnies-1.anim.json").to_str().unwrap(),
-        ])
-        .args(["--frames", "4", "--vpls", "32", "--width", "24", "--height", "24", "--threads", "1"])
-        .args(["--modes", "temporal,igi,temporal", "--json"])
-        .arg(&json)
-        .output()
-        .unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    let args = ["--frames", "4", "--vpls", "32", "--width", "24", "--height", "24", "--threads", "1"];
+    let v = bench_bunnies("icache", &[&args[..], &["--modes", "temporal,igi,temporal"]].concat());
     let modes = v["modes"].as_array().unwrap();
     assert_eq!(modes.iter().map(|m| m["mode"].as_str().unwrap()).collect::<Vec<_>>(), ["temporal", "igi"]);
     for m in modes {
