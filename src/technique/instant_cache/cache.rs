@@ -197,9 +197,9 @@ impl Cache {
             return None;
         }
         let inverse = d2.sqrt() / reach + (1.0 - n.dot(normal)).max(0.0).sqrt() * self.normal_scale;
-        // A NaN weighs in, as it always has (a NaN hit is seen, not dropped).
-        let below_one = inverse.partial_cmp(&1.0).is_none_or(|o| o == std::cmp::Ordering::Less);
-        below_one.then(|| 1.0 / inverse.max(1e-12))
+        // A NaN passes, as it did before this test was a function of its own, so lists keep
+        // their bits.
+        (inverse < 1.0 || inverse.is_nan()).then(|| 1.0 / inverse.max(1e-12))
     }
 
     /// How far a record reaches: a·D, in scene units.

@@ -102,7 +102,8 @@ pub fn keep_lists(
 
 /// The cells a tick's new records may reach: [`Cells`] over the scene's first extent, at least
 /// the records' reach wide; points outside it fall into the border cells, which keeps the test
-/// conservative.
+/// conservative. The marked cells answer "may a new record reach this sample?" with one read,
+/// for every sample; the grid of the new records answers "which?" for the few that may.
 pub struct NewRecords {
     cells: Cells,
     marked: Vec<bool>,
