@@ -106,127 +106,136 @@ fn two_nodes_behind_haproxy_route_drain_and_migrate() {
     let proxy = Proxy::start([&a.addr, &b.addr, &dead]);
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
     let http = reqwest::Client::builder().timeout(Duration::from_secs(60)).build().unwrap();
-    let ids = runtime.block_on(async {
-        eventually(Duration::from_secs(20), "the proxy answers", async || {
-            http.get(proxy.url("/healthz")).send().await.is_ok_and(|r| r.status() == 200)
-        })
-        .await;
-        let metrics = http.get(a.url("/metrics")).send().await.unwrap().text().await.unwrap();
-        assert!(metrics.contains("\nrelume_draining 0\n"), "{metrics}");
-        // Creates are balanced; every later request for a session lands on its owner.
-        let mut ids = Vec::new();
-        for i in 0..SESSIONS {
-            let (status, node, v) = post(&http, proxy.url("/v1/sessions"), &create_body(i as u64)).await;
-            assert_eq!(status, 201, "{v}");
-            let id = v["id"].as_str().unwrap().to_string();
-            assert!(id.starts_with(&format!("{node}.")), "{id} was answered by {node}");
-            ids.push(id);
-        }
-        for node in ["relume-0", "relume-1"] {
-            assert!(ids.iter().any(|id| id.starts_with(node)), "no session on {node}: {ids:?}");
-        }
-        for id in &ids {
-            let owner = id.split('.').next().unwrap();
-            let (s, node, _) = post(&http, proxy.url(&format!("/v1/sessions/{id}/edits")), &light_edit()).await;
-            assert_eq!((s, node.as_str()), (202, owner));
-            let (s, node, _) = post(&http, proxy.url(&format!("/v1/sessions/{id}/tick")), &Value::Null).await;
-            assert_eq!((s, node.as_str()), (200, owner));
-            let r = http.get(proxy.url(&format!("/v1/sessions/{id}/frame.png?tick=0"))).send().await.unwrap();
-            assert_eq!((r.status().as_u16(), node_of(&r).as_str()), (200, owner));
-        }
-        // WebSocket frames flow through the proxy.
-        let mut ws = common::ws::open(&format!("ws://{}/v1/sessions/{}/ws", proxy.addr, ids[0])).await;
-        send(&mut ws, json!({"type": "subscribe", "frames": "png", "stats": true, "every": 1})).await;
-        send(&mut ws, json!({"type": "tick"})).await;
-        let stats = next_text(&mut ws).await;
-        assert_eq!(stats["stats"]["tick"], 1, "{stats}");
-        assert_eq!(next_frame(&mut ws).await.0.tick, 1);
-        ids
-    });
-
+    let ids = runtime.block_on(route_through(&http, &proxy, &a));
     // Drain relume-0: it refuses creates, the proxy stops sending it any, its sessions tick on.
     a.sigterm();
     let on_a: Vec<String> = ids.iter().filter(|id| id.starts_with("relume-0.")).cloned().collect();
-    let report = runtime.block_on(async {
-        eventually(Duration::from_secs(10), "relume-0 reports draining", async || {
-            http.get(a.url("/healthz")).send().await.is_ok_and(|r| r.status() == 503)
-        })
-        .await;
-        let metrics = http.get(a.url("/metrics")).send().await.unwrap().text().await.unwrap();
-        assert!(metrics.contains("\nrelume_draining 1\n"), "{metrics}");
-        let reserved = metrics.lines().find_map(|l| l.strip_prefix("relume_session_memory_reserved_bytes "));
-        assert!(reserved.and_then(|b| b.parse::<u64>().ok()).is_some_and(|b| b > 0), "{reserved:?}");
-        let r = http.post(a.url("/v1/sessions")).json(&create_body(1)).send().await.unwrap();
-        assert_eq!(r.status(), 503);
-        assert_eq!(r.headers().get("retry-after").and_then(|v| v.to_str().ok()), Some("1"));
-        assert_eq!(r.json::<Value>().await.unwrap()["error"], "draining");
-        for seed in 0..4 {
-            let (status, node, v) = post(&http, proxy.url("/v1/sessions"), &create_body(100 + seed)).await;
-            assert_eq!((status, node.as_str()), (201, "relume-1"), "{v}");
-            let id = v["id"].as_str().unwrap();
-            assert_eq!(http.delete(proxy.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().status(), 204);
-        }
-        for id in &on_a {
-            let (s, node, t) = post(&http, proxy.url(&format!("/v1/sessions/{id}/tick")), &Value::Null).await;
-            assert_eq!((s, node.as_str()), (200, "relume-0"), "a draining node's session must tick on: {t}");
-        }
-        // Queue an edit that only the migrated session will apply, so its scene must travel.
-        for id in &on_a {
-            post(&http, proxy.url(&format!("/v1/sessions/{id}/edits")), &light_edit()).await;
-        }
-        let out = Command::new(BIN)
-            .args(["migrate", "--from", &a.url(""), "--to", &proxy.url(""), "--all", "--json", "/dev/stdout"])
-            .output()
-            .expect("relume migrate runs");
-        assert!(out.status.success(), "relume migrate failed: {}", String::from_utf8_lossy(&out.stderr));
-        let text = String::from_utf8_lossy(&out.stdout);
-        let json_end = text.rfind(']').expect("a JSON report") + 1;
-        serde_json::from_str::<Vec<Value>>(&text[..json_end]).expect("the report parses")
-    });
+    let report = runtime.block_on(drain_and_migrate(&http, &proxy, &a, &on_a));
     assert_eq!(report.len(), on_a.len(), "{report:?}");
-
-    // Each moved session continues from its tick on relume-1, against a twin that never moved.
-    runtime.block_on(async {
-        for moved in &report {
-            let (old, new) = (moved["from"].as_str().unwrap(), moved["to"].as_str().unwrap());
-            assert!(new.starts_with("relume-1."), "{moved}");
-            let view: Value =
-                http.get(proxy.url(&format!("/v1/sessions/{new}"))).send().await.unwrap().json().await.unwrap();
-            let seed = view["seed"].as_u64().unwrap();
-            assert_eq!(Some(view["ticks"].as_u64().unwrap()), moved["tick"].as_u64(), "{old} → {new}");
-            let (_, _, twin) = post(&http, b.url("/v1/sessions"), &create_body(seed)).await;
-            let twin = twin["id"].as_str().unwrap().to_string();
-            let (_, _, stale) = post(&http, b.url("/v1/sessions"), &create_body(seed)).await;
-            let stale = stale["id"].as_str().unwrap().to_string();
-            post(&http, b.url(&format!("/v1/sessions/{twin}/edits")), &light_edit()).await;
-            let mut last = [Value::Null, Value::Null, Value::Null];
-            for _ in 0..8 {
-                for (k, id) in [new, twin.as_str(), stale.as_str()].into_iter().enumerate() {
-                    last[k] = post(&http, proxy.url(&format!("/v1/sessions/{id}/tick")), &Value::Null).await.2;
-                }
-            }
-            let scene = |id: String| {
-                let http = http.clone();
-                async move { http.get(id).send().await.unwrap().json::<Value>().await.unwrap() }
-            };
-            assert_eq!(
-                scene(proxy.url(&format!("/v1/sessions/{new}/scene"))).await,
-                scene(proxy.url(&format!("/v1/sessions/{twin}/scene"))).await,
-                "{new}: the moved session's scene differs from its twin's"
-            );
-            let tick = |k: usize| last[k]["stats"]["tick"].as_u64().unwrap();
-            let moved_image = frame(&http, proxy.url(&format!("/v1/sessions/{new}/frame.png?tick={}", tick(0)))).await;
-            let twin_image = frame(&http, proxy.url(&format!("/v1/sessions/{twin}/frame.png?tick={}", tick(1)))).await;
-            let stale_image =
-                frame(&http, proxy.url(&format!("/v1/sessions/{stale}/frame.png?tick={}", tick(2)))).await;
-            common::assert_matches_reference(&format!("{new} vs its twin"), &moved_image, &twin_image, TWIN);
-            common::assert_rejected_by_reference("a twin without the edit", &stale_image, &twin_image, TWIN);
-            for id in [twin, stale] {
-                http.delete(b.url(&format!("/v1/sessions/{id}"))).send().await.unwrap();
-            }
-        }
-    });
+    runtime.block_on(continue_like_twins(&http, &proxy, &b, &report));
     // With its sessions gone, the drained node exits cleanly before its grace ends.
     let status = a.wait_exit(Duration::from_secs(30));
     assert_eq!(status.code(), Some(0), "relume-0 ended with {status:?}");
+}
+
+/// Creates [`SESSIONS`] sessions through the proxy, checks that creates are balanced, that
+/// every later request lands on the session's owner and that WebSocket frames flow through;
+/// returns the session ids.
+async fn route_through(http: &reqwest::Client, proxy: &Proxy, a: &Served) -> Vec<String> {
+    eventually(Duration::from_secs(20), "the proxy answers", async || {
+        http.get(proxy.url("/healthz")).send().await.is_ok_and(|r| r.status() == 200)
+    })
+    .await;
+    let metrics = http.get(a.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    assert!(metrics.contains("\nrelume_draining 0\n"), "{metrics}");
+    let mut ids = Vec::new();
+    for i in 0..SESSIONS {
+        let (status, node, v) = post(http, proxy.url("/v1/sessions"), &create_body(i as u64)).await;
+        assert_eq!(status, 201, "{v}");
+        let id = v["id"].as_str().unwrap().to_string();
+        assert!(id.starts_with(&format!("{node}.")), "{id} was answered by {node}");
+        ids.push(id);
+    }
+    for node in ["relume-0", "relume-1"] {
+        assert!(ids.iter().any(|id| id.starts_with(node)), "no session on {node}: {ids:?}");
+    }
+    for id in &ids {
+        let owner = id.split('.').next().unwrap();
+        let (s, node, _) = post(http, proxy.url(&format!("/v1/sessions/{id}/edits")), &light_edit()).await;
+        assert_eq!((s, node.as_str()), (202, owner));
+        let (s, node, _) = post(http, proxy.url(&format!("/v1/sessions/{id}/tick")), &Value::Null).await;
+        assert_eq!((s, node.as_str()), (200, owner));
+        let r = http.get(proxy.url(&format!("/v1/sessions/{id}/frame.png?tick=0"))).send().await.unwrap();
+        assert_eq!((r.status().as_u16(), node_of(&r).as_str()), (200, owner));
+    }
+    let mut ws = common::ws::open(&format!("ws://{}/v1/sessions/{}/ws", proxy.addr, ids[0])).await;
+    send(&mut ws, json!({"type": "subscribe", "frames": "png", "stats": true, "every": 1})).await;
+    send(&mut ws, json!({"type": "tick"})).await;
+    let stats = next_text(&mut ws).await;
+    assert_eq!(stats["stats"]["tick"], 1, "{stats}");
+    assert_eq!(next_frame(&mut ws).await.0.tick, 1);
+    ids
+}
+
+/// With relume-0 (`a`) draining: it reports so and refuses creates, the proxy sends creates to
+/// relume-1, relume-0's sessions (`on_a`) tick on, and `relume migrate` moves them, each with
+/// an edit queued that only the migrated session will apply. Returns migrate's JSON report.
+async fn drain_and_migrate(http: &reqwest::Client, proxy: &Proxy, a: &Served, on_a: &[String]) -> Vec<Value> {
+    eventually(Duration::from_secs(10), "relume-0 reports draining", async || {
+        http.get(a.url("/healthz")).send().await.is_ok_and(|r| r.status() == 503)
+    })
+    .await;
+    let metrics = http.get(a.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    assert!(metrics.contains("\nrelume_draining 1\n"), "{metrics}");
+    let reserved = metrics.lines().find_map(|l| l.strip_prefix("relume_session_memory_reserved_bytes "));
+    assert!(reserved.and_then(|b| b.parse::<u64>().ok()).is_some_and(|b| b > 0), "{reserved:?}");
+    let r = http.post(a.url("/v1/sessions")).json(&create_body(1)).send().await.unwrap();
+    assert_eq!(r.status(), 503);
+    assert_eq!(r.headers().get("retry-after").and_then(|v| v.to_str().ok()), Some("1"));
+    assert_eq!(r.json::<Value>().await.unwrap()["error"], "draining");
+    for seed in 0..4 {
+        let (status, node, v) = post(http, proxy.url("/v1/sessions"), &create_body(100 + seed)).await;
+        assert_eq!((status, node.as_str()), (201, "relume-1"), "{v}");
+        let id = v["id"].as_str().unwrap();
+        assert_eq!(http.delete(proxy.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().status(), 204);
+    }
+    for id in on_a {
+        let (s, node, t) = post(http, proxy.url(&format!("/v1/sessions/{id}/tick")), &Value::Null).await;
+        assert_eq!((s, node.as_str()), (200, "relume-0"), "a draining node's session must tick on: {t}");
+    }
+    // Queue an edit that only the migrated session will apply, so its scene must travel.
+    for id in on_a {
+        post(http, proxy.url(&format!("/v1/sessions/{id}/edits")), &light_edit()).await;
+    }
+    let out = Command::new(BIN)
+        .args(["migrate", "--from", &a.url(""), "--to", &proxy.url(""), "--all", "--json", "/dev/stdout"])
+        .output()
+        .expect("relume migrate runs");
+    assert!(out.status.success(), "relume migrate failed: {}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let json_end = text.rfind(']').expect("a JSON report") + 1;
+    serde_json::from_str::<Vec<Value>>(&text[..json_end]).expect("the report parses")
+}
+
+/// Each moved session in `report` continues from its tick on relume-1 (`b`): its scene equals
+/// a twin's that never moved and got the same edit, and its frame matches the twin's, while a
+/// twin without the edit is rejected (the negative control).
+async fn continue_like_twins(http: &reqwest::Client, proxy: &Proxy, b: &Served, report: &[Value]) {
+    for moved in report {
+        let (old, new) = (moved["from"].as_str().unwrap(), moved["to"].as_str().unwrap());
+        assert!(new.starts_with("relume-1."), "{moved}");
+        let view: Value =
+            http.get(proxy.url(&format!("/v1/sessions/{new}"))).send().await.unwrap().json().await.unwrap();
+        let seed = view["seed"].as_u64().unwrap();
+        assert_eq!(Some(view["ticks"].as_u64().unwrap()), moved["tick"].as_u64(), "{old} → {new}");
+        let (_, _, twin) = post(http, b.url("/v1/sessions"), &create_body(seed)).await;
+        let twin = twin["id"].as_str().unwrap().to_string();
+        let (_, _, stale) = post(http, b.url("/v1/sessions"), &create_body(seed)).await;
+        let stale = stale["id"].as_str().unwrap().to_string();
+        post(http, b.url(&format!("/v1/sessions/{twin}/edits")), &light_edit()).await;
+        let mut last = [Value::Null, Value::Null, Value::Null];
+        for _ in 0..8 {
+            for (k, id) in [new, twin.as_str(), stale.as_str()].into_iter().enumerate() {
+                last[k] = post(http, proxy.url(&format!("/v1/sessions/{id}/tick")), &Value::Null).await.2;
+            }
+        }
+        let scene = |id: String| {
+            let http = http.clone();
+            async move { http.get(id).send().await.unwrap().json::<Value>().await.unwrap() }
+        };
+        assert_eq!(
+            scene(proxy.url(&format!("/v1/sessions/{new}/scene"))).await,
+            scene(proxy.url(&format!("/v1/sessions/{twin}/scene"))).await,
+            "{new}: the moved session's scene differs from its twin's"
+        );
+        let tick = |k: usize| last[k]["stats"]["tick"].as_u64().unwrap();
+        let moved_image = frame(http, proxy.url(&format!("/v1/sessions/{new}/frame.png?tick={}", tick(0)))).await;
+        let twin_image = frame(http, proxy.url(&format!("/v1/sessions/{twin}/frame.png?tick={}", tick(1)))).await;
+        let stale_image = frame(http, proxy.url(&format!("/v1/sessions/{stale}/frame.png?tick={}", tick(2)))).await;
+        common::assert_matches_reference(&format!("{new} vs its twin"), &moved_image, &twin_image, TWIN);
+        common::assert_rejected_by_reference("a twin without the edit", &stale_image, &twin_image, TWIN);
+        for id in [twin, stale] {
+            http.delete(b.url(&format!("/v1/sessions/{id}"))).send().await.unwrap();
+        }
+    }
 }

@@ -1,14 +1,16 @@
-//! glTF 2.0 import and export on real files: the bundled scenes exported and read back
-//! (round trip), the Cornell box as glTF against the JSON Cornell box, hand-built files for
-//! each feature the importer reads, and bad files, each refused with an error naming the part.
+//! glTF 2.0 export and import on real files: the bundled scenes exported and read back (round
+//! trip), the Cornell box as glTF against the JSON Cornell box, a .glb against a .gltf with an
+//! external buffer, every technique on an exported mesh light, the bundled .glb files against
+//! the exporter, Khronos's validator, and a file written by obj2gltf. Each feature the
+//! importer reads, and bad files, are in `gltf_import.rs`.
 mod common;
-
 use base64::Engine;
-use glam::{Mat4, Quat, Vec3};
+use common::gltf_doc::{animated_doc, build, close, import, materials_doc, tempdir};
+use glam::Vec3;
 use relume::scene::animation::Animation;
-use relume::scene::edits::{apply, Edit};
+use relume::scene::edits::apply;
 use relume::scene::gltf::{export_glb, import_slice, ImportOptions, Imported};
-use relume::scene::{LightGeometry, Material, Scene, SceneError, ShapeDesc};
+use relume::scene::{LightGeometry, Material, Scene, ShapeDesc};
 use relume::technique::TechniqueConfig;
 use serde_json::{json, Value};
 
@@ -22,10 +24,6 @@ fn round_trip(name: &str) -> (Scene, Option<Animation>, Imported) {
     let glb = export_glb(&scene, &anims).expect("export");
     let imported = import_slice(&glb, None, &ImportOptions::default()).expect("import of the export");
     (scene, anim, imported)
-}
-
-fn close(a: Vec3, b: Vec3, tol: f32) -> bool {
-    (a - b).length() <= tol
 }
 
 /// Every difference between two scenes beyond `tol` (a length in scene units), as text.
@@ -118,11 +116,6 @@ fn extent(scene: &Scene) -> f32 {
     scene.bounds().map(|(lo, hi)| (hi - lo).length()).unwrap_or(1.0)
 }
 
-fn build(imported: &Imported) -> Scene {
-    Scene::from_desc(imported.desc.clone(), &common::scenes_dir(), &common::scenes_dir())
-        .expect("imported scene builds")
-}
-
 #[test]
 fn every_bundled_scene_survives_export_and_import() {
     let mut names: Vec<String> = std::fs::read_dir(common::scenes_dir())
@@ -181,265 +174,6 @@ fn the_cornell_box_as_gltf_renders_as_the_json_cornell_box() {
     assert!(common::rel_mse(&control, &json) > tolerance, "a 2% darker wall went unseen");
 }
 
-/// A glTF document being built by hand, buffers as one `data:` URI.
-#[derive(Default)]
-struct Doc {
-    bin: Vec<u8>,
-    views: Vec<Value>,
-    accessors: Vec<Value>,
-}
-
-impl Doc {
-    fn floats(&mut self, v: &[f32], kind: &str) -> usize {
-        let offset = self.bin.len();
-        self.bin.extend(v.iter().flat_map(|x| x.to_le_bytes()));
-        self.views.push(json!({"buffer": 0, "byteOffset": offset, "byteLength": v.len() * 4}));
-        let width = match kind {
-            "SCALAR" => 1,
-            "VEC3" => 3,
-            _ => 4,
-        };
-        let mut a =
-            json!({"bufferView": self.views.len() - 1, "componentType": 5126, "count": v.len() / width, "type": kind});
-        if kind == "VEC3" || kind == "SCALAR" {
-            let (mut lo, mut hi) = (vec![f32::MAX; width], vec![f32::MIN; width]);
-            for c in v.chunks(width) {
-                for k in 0..width {
-                    lo[k] = lo[k].min(c[k]);
-                    hi[k] = hi[k].max(c[k]);
-                }
-            }
-            a["min"] = json!(lo);
-            a["max"] = json!(hi);
-        }
-        self.accessors.push(a);
-        self.accessors.len() - 1
-    }
-
-    /// A unit right triangle in XY facing +Z, as a mesh primitive with `material`.
-    fn triangle(&mut self, material: Option<usize>) -> Value {
-        let p = self.floats(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], "VEC3");
-        let mut prim = json!({"attributes": {"POSITION": p}});
-        if let Some(m) = material {
-            prim["material"] = json!(m);
-        }
-        json!({"primitives": [prim]})
-    }
-
-    fn finish(self, mut root: Value) -> Vec<u8> {
-        let uri = format!(
-            "data:application/octet-stream;base64,{}",
-            base64::engine::general_purpose::STANDARD.encode(&self.bin)
-        );
-        root["asset"] = json!({"version": "2.0"});
-        root["buffers"] = json!([{"byteLength": self.bin.len(), "uri": uri}]);
-        root["bufferViews"] = json!(self.views);
-        root["accessors"] = json!(self.accessors);
-        serde_json::to_vec(&root).expect("json")
-    }
-}
-
-fn import(bytes: &[u8]) -> Result<Imported, SceneError> {
-    import_slice(bytes, None, &ImportOptions::default())
-}
-
-fn world_vertices(imported: &Imported, name: &str) -> Vec<Vec3> {
-    let scene = build(imported);
-    let i = scene.object_index(name).unwrap_or_else(|| panic!("no object {name}"));
-    scene.objects[i].world_positions.clone()
-}
-
-#[test]
-fn nested_node_transforms_compose_into_world_positions() {
-    let mut doc = Doc::default();
-    let mesh = doc.triangle(None);
-    let (q, t, s) = (Quat::from_rotation_z(0.5), Vec3::new(1.0, 2.0, 3.0), 2.0);
-    let bytes = doc.finish(json!({
-        "scene": 0, "scenes": [{"nodes": [0]}], "meshes": [mesh],
-        "nodes": [
-            {"name": "parent", "translation": t.to_array(), "rotation": q.to_array(), "children": [1]},
-            {"name": "child", "scale": [s, s, s], "children": [2]},
-            {"name": "leaf", "mesh": 0, "matrix": Mat4::from_translation(Vec3::X).to_cols_array()},
-        ],
-    }));
-    let imported = import(&bytes).expect("import");
-    let expected =
-        Mat4::from_rotation_translation(q, t) * Mat4::from_scale(Vec3::splat(s)) * Mat4::from_translation(Vec3::X);
-    let got = world_vertices(&imported, "leaf");
-    for (p, local) in got.iter().zip([Vec3::ZERO, Vec3::X, Vec3::Y]) {
-        assert!(close(*p, expected.transform_point3(local), 1e-5), "{p} vs {}", expected.transform_point3(local));
-    }
-    // The warnings name the missing material and the missing camera.
-    assert!(imported.warnings.iter().any(|w| w.contains("without a material")), "{:?}", imported.warnings);
-    assert!(imported.warnings.iter().any(|w| w.contains("no perspective camera")), "{:?}", imported.warnings);
-}
-
-fn materials_doc() -> Vec<u8> {
-    let mut doc = Doc::default();
-    let meshes: Vec<Value> = (0..6).map(|m| doc.triangle(Some(m))).collect();
-    let nodes: Vec<Value> = (0..6)
-        .map(|m| json!({"name": format!("n{m}"), "mesh": m, "translation": [m as f32 * 2.0, 0.0, 0.0]}))
-        .collect();
-    doc.finish(json!({
-        "scene": 0, "scenes": [{"nodes": [0, 1, 2, 3, 4, 5]}], "meshes": meshes, "nodes": nodes,
-        "extensionsUsed": ["KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_emissive_strength"],
-        "textures": [{"source": 0}], "images": [{"uri": "brick.png"}],
-        "materials": [
-            {"name": "paint", "pbrMetallicRoughness": {"baseColorFactor": [0.5, 0.25, 0.125, 1.0], "metallicFactor": 0.0}},
-            {"name": "chrome", "pbrMetallicRoughness": {"baseColorFactor": [0.9, 0.8, 0.7, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.0}},
-            {"name": "glass", "extensions": {"KHR_materials_transmission": {"transmissionFactor": 1.0}, "KHR_materials_ior": {"ior": 1.33}}},
-            {"name": "brushed", "pbrMetallicRoughness": {"baseColorFactor": [0.6, 0.6, 0.6, 1.0], "metallicFactor": 1.0, "roughnessFactor": 0.5}},
-            {"name": "brick", "pbrMetallicRoughness": {"baseColorFactor": [0.7, 0.3, 0.2, 1.0], "metallicFactor": 0.0, "baseColorTexture": {"index": 0}}},
-            {"name": "lamp", "emissiveFactor": [1.0, 0.5, 0.25], "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": 8.0}}},
-        ],
-    }))
-}
-
-#[test]
-fn every_material_mapping_reads_as_documented() {
-    let imported = import(&materials_doc()).expect("import");
-    let m = &imported.desc.materials;
-    let rgb = relume::core::Rgb::new;
-    assert_eq!(m["paint"], Material::Diffuse { reflectance: rgb(0.5, 0.25, 0.125) });
-    assert_eq!(m["chrome"], Material::Mirror { reflectance: rgb(0.9, 0.8, 0.7) });
-    assert_eq!(m["glass"], Material::Glass { ior: 1.33 });
-    assert_eq!(m["brushed"], Material::Diffuse { reflectance: rgb(0.6, 0.6, 0.6) });
-    assert_eq!(m["brick"], Material::Diffuse { reflectance: rgb(0.7, 0.3, 0.2) });
-    assert!(!m.contains_key("lamp"), "an emissive material makes a light, not an object");
-    let lamp = imported.desc.lights.iter().find(|l| l.name == "n5").expect("the emissive primitive is a light");
-    let relume::scene::EmitterDesc::Mesh { radiance, .. } = &lamp.emitter else { panic!("a mesh emitter expected") };
-    assert_eq!(*radiance, rgb(8.0, 4.0, 2.0));
-    let w = imported.warnings.join("\n");
-    assert!(w.contains("metallic") && w.contains("'brushed'"), "{w}");
-    assert!(w.contains("base colour textures") && w.contains("'brick'"), "{w}");
-}
-
-#[test]
-fn punctual_lights_and_the_camera_read_in_relume_units() {
-    let mut doc = Doc::default();
-    let mesh = doc.triangle(None);
-    let down = Quat::from_rotation_x(-std::f32::consts::FRAC_PI_2);
-    let bytes = doc.finish(json!({
-        "scene": 0, "scenes": [{"nodes": [0, 1, 2, 3]}], "meshes": [mesh],
-        "extensionsUsed": ["KHR_lights_punctual"],
-        "extensions": {"KHR_lights_punctual": {"lights": [
-            {"type": "point", "color": [1.0, 0.5, 0.25], "intensity": 683.0},
-            {"type": "spot", "intensity": 1366.0, "spot": {"innerConeAngle": 0.2, "outerConeAngle": 0.5}},
-        ]}},
-        "cameras": [{"name": "main", "type": "perspective", "perspective": {"yfov": 0.8, "aspectRatio": 2.0, "znear": 0.01}}],
-        "nodes": [
-            {"name": "floor", "mesh": 0},
-            {"name": "bulb", "translation": [0.0, 3.0, 0.0], "extensions": {"KHR_lights_punctual": {"light": 0}}},
-            {"name": "spot", "translation": [0.0, 4.0, 0.0], "rotation": down.to_array(), "extensions": {"KHR_lights_punctual": {"light": 1}}},
-            {"name": "eye", "translation": [0.0, 1.0, 5.0], "camera": 0},
-        ],
-    }));
-    let imported = import(&bytes).expect("import");
-    let scene = build(&imported);
-    let bulb = &scene.lights[scene.light_index("bulb").expect("bulb")];
-    let LightGeometry::Point { position, intensity } = bulb.geometry else { panic!("point") };
-    assert_eq!(position, Vec3::new(0.0, 3.0, 0.0));
-    assert_eq!(intensity, relume::core::Rgb::new(1.0, 0.5, 0.25), "683 cd is 1 W/sr");
-    let spot = &scene.lights[scene.light_index("spot").expect("spot")];
-    let LightGeometry::Spot { axis, intensity, cos_falloff_start, cos_falloff_end, .. } = spot.geometry else {
-        panic!("spot")
-    };
-    // glTF's −Z turned down by the node: the spot shines along (−Z rotated) = −Y.
-    assert!(close(axis, down * Vec3::NEG_Z, 1e-5), "axis {axis}");
-    assert!((intensity.g - 2.0).abs() < 1e-5);
-    assert!((cos_falloff_start - 0.2f32.cos()).abs() < 1e-5 && (cos_falloff_end - 0.5f32.cos()).abs() < 1e-5);
-    let cam = &imported.desc.camera;
-    assert_eq!(cam.position, [0.0, 1.0, 5.0]);
-    assert!((cam.vfov_deg - 0.8f32.to_degrees()).abs() < 1e-4);
-    assert_eq!(cam.resolution, [512, 256], "aspect 2 at the default 256 rows");
-    let forward = (Vec3::from(cam.look_at) - Vec3::from(cam.position)).normalize();
-    assert!(close(forward, Vec3::NEG_Z, 1e-5), "glTF cameras look along −Z: {forward}");
-}
-
-/// An animation on node 0 (a parent) and node 1 (its child with the mesh), one channel per
-/// interpolation mode.
-fn animated_doc() -> Vec<u8> {
-    animated_doc_with(true)
-}
-
-/// [`animated_doc`], or (`cubic: false`, a negative control) with the scale channel a LINEAR
-/// line between the same two key values.
-fn animated_doc_with(cubic: bool) -> Vec<u8> {
-    let mut doc = Doc::default();
-    let mesh = doc.triangle(None);
-    let t_lin = doc.floats(&[0.0, 2.0], "SCALAR");
-    let v_lin = doc.floats(&[0.0, 0.0, 0.0, 4.0, 0.0, 0.0], "VEC3");
-    let t_step = doc.floats(&[0.0, 1.0], "SCALAR");
-    let v_step = doc.floats(&[0.0, 0.0, 0.0, 0.0, 5.0, 0.0], "VEC3");
-    let t_cub = doc.floats(&[0.0, 2.0], "SCALAR");
-    // (in-tangent, value, out-tangent) per key: a scale from 1 to 3 with zero tangents.
-    let v_cub = if cubic {
-        doc.floats(&[0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 3.0, 3.0, 3.0, 0.0, 0.0, 0.0], "VEC3")
-    } else {
-        doc.floats(&[1.0, 1.0, 1.0, 3.0, 3.0, 3.0], "VEC3")
-    };
-    let cubic_mode = if cubic { "CUBICSPLINE" } else { "LINEAR" };
-    doc.finish(json!({
-        "scene": 0, "scenes": [{"nodes": [0]}], "meshes": [mesh],
-        "nodes": [{"name": "rig", "children": [1]}, {"name": "body", "mesh": 0}],
-        "animations": [{"name": "walk",
-            "samplers": [
-                {"input": t_lin, "output": v_lin, "interpolation": "LINEAR"},
-                {"input": t_step, "output": v_step, "interpolation": "STEP"},
-                {"input": t_cub, "output": v_cub, "interpolation": cubic_mode},
-            ],
-            "channels": [
-                {"sampler": 0, "target": {"node": 0, "path": "translation"}},
-                {"sampler": 1, "target": {"node": 1, "path": "translation"}},
-                {"sampler": 2, "target": {"node": 1, "path": "scale"}},
-            ]}],
-    }))
-}
-
-#[test]
-fn animations_read_linear_step_and_cubic_channels_through_the_hierarchy() {
-    let imported = import(&animated_doc()).expect("import");
-    assert!(imported.desc.objects[0].dynamic, "an animated node's mesh is dynamic");
-    let anim = imported.animation("walk").expect("named as the file names it");
-    let scene = build(&imported);
-    anim.validate(&scene).expect("valid against its scene");
-    let pose = |t: f32| {
-        let edits = anim.edits_at(t);
-        let Some(Edit::Object { transform, .. }) = edits.first() else { panic!("an object edit") };
-        *transform
-    };
-    // glTF's own definitions, evaluated by hand: LINEAR x = 2t, STEP y = 5 from t = 1,
-    // CUBICSPLINE scale 1 + 2(3s² − 2s³) with s = t/2 and zero tangents.
-    let cubic_scale = |t: f32| {
-        let s = t / 2.0;
-        1.0 + 2.0 * (3.0 * s * s - 2.0 * s * s * s)
-    };
-    let times = [0.25f32, 0.5, 0.99, 1.01, 1.5, 1.95];
-    // Negative control for the cubic tolerance: the same keys joined by a straight line miss
-    // the Hermite curve by more than it.
-    let line = import(&animated_doc_with(false)).expect("import");
-    let line_anim = line.animation("walk").expect("walk");
-    let worst_line = times
-        .iter()
-        .map(|&t| {
-            let edits = line_anim.edits_at(t);
-            let Some(Edit::Object { transform, .. }) = edits.first() else { panic!("an object edit") };
-            (transform.scale[0] - cubic_scale(t)).abs()
-        })
-        .fold(0.0f32, f32::max);
-    assert!(worst_line > 0.02, "a LINEAR scale channel passes the cubic tolerance ({worst_line})");
-    for t in times {
-        let got = pose(t);
-        let scale = cubic_scale(t);
-        let y = if t < 1.0 { 0.0 } else { 5.0 };
-        assert!((got.translation[0] - 2.0 * t).abs() < 1e-4, "t {t}: x {}", got.translation[0]);
-        assert!((got.translation[1] - y).abs() < 1e-4, "t {t}: y {}", got.translation[1]);
-        // Cubic segments are sampled at 8 points: between them the error is that of a chord.
-        assert!((got.scale[0] - scale).abs() < 0.02, "t {t}: scale {} vs {scale}", got.scale[0]);
-    }
-    assert!(imported.warnings.iter().any(|w| w.contains("CUBICSPLINE")), "{:?}", imported.warnings);
-}
-
 #[test]
 fn a_glb_and_a_gltf_with_an_external_bin_read_the_same() {
     let dir = tempdir("external-bin");
@@ -463,87 +197,6 @@ fn a_glb_and_a_gltf_with_an_external_bin_read_the_same() {
     std::fs::write(dir.join("escape.gltf"), serde_json::to_vec(&root).expect("json")).expect("gltf");
     let err = Scene::load_file(&dir.join("escape.gltf"), &dir, &ImportOptions::default()).err().expect("refused");
     assert!(err.to_string().contains("buffers[0].uri") && err.to_string().contains("escapes"), "{err}");
-}
-
-fn tempdir(tag: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("relume-gltf-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).expect("temp dir");
-    dir
-}
-
-#[test]
-fn bad_files_are_refused_naming_the_part() {
-    let base: Value = serde_json::from_slice(&materials_doc()).expect("json");
-    type Mutation = Box<dyn Fn(&mut Value)>;
-    let cases: Vec<(&str, Mutation, &str)> = vec![
-        (
-            "lines",
-            Box::new(|d: &mut Value| d["meshes"][0]["primitives"][0]["mode"] = json!(1)),
-            "meshes[0].primitives[0].mode",
-        ),
-        (
-            "shear",
-            Box::new(
-                |d: &mut Value| d["nodes"][0] = json!({"name": "n0", "mesh": 0, "matrix": [1.0, 0.0, 0.0, 0.0, 0.5, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0]}),
-            ),
-            "nodes[0] ('n0').matrix",
-        ),
-        (
-            "sun",
-            Box::new(|d: &mut Value| {
-                d["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "directional"}]}});
-                d["nodes"][0]["extensions"] = json!({"KHR_lights_punctual": {"light": 0}});
-            }),
-            "directional",
-        ),
-        ("cycle", Box::new(|d: &mut Value| d["nodes"][1]["children"] = json!([1])), "nodes[1]"),
-        ("short buffer", Box::new(|d: &mut Value| d["buffers"][0]["byteLength"] = json!(1 << 20)), "buffers[0]"),
-        ("file buffer inline", Box::new(|d: &mut Value| d["buffers"][0]["uri"] = json!("mesh.bin")), "buffers[0].uri"),
-        // gltf-json's own validation indexes this accessor before checking it (it panics).
-        (
-            "accessor out of range",
-            Box::new(|d: &mut Value| d["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(99)),
-            "gltf",
-        ),
-        (
-            "no scene",
-            Box::new(|d: &mut Value| {
-                d.as_object_mut().expect("object").remove("scene");
-                d["scenes"] = json!([]);
-            }),
-            "scenes",
-        ),
-    ];
-    for (what, mutate, part) in cases {
-        let mut doc = base.clone();
-        mutate(&mut doc);
-        let err = import(&serde_json::to_vec(&doc).expect("json")).err().unwrap_or_else(|| panic!("{what}: accepted"));
-        assert!(err.to_string().contains(part), "{what}: '{err}' does not name {part}");
-    }
-    // Non-finite data and a bad index live in the buffers: build them so.
-    let mut doc = Doc::default();
-    let p = doc.floats(&[0.0, 0.0, 0.0, f32::NAN, 0.0, 0.0, 0.0, 1.0, 0.0], "VEC3");
-    let bytes = doc.finish(json!({"scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], "meshes": [{"primitives": [{"attributes": {"POSITION": p}}]}]}));
-    let err = import(&bytes).expect_err("NaN refused");
-    assert!(err.to_string().contains("positions[1][0]"), "{err}");
-}
-
-#[test]
-fn mangled_glb_bytes_are_refused_or_read_never_a_panic() {
-    let glb = export_glb(&common::load("walker.json"), &[]).expect("export");
-    use proptest::prelude::*;
-    let mut runner = proptest::test_runner::TestRunner::new(ProptestConfig { cases: 400, ..ProptestConfig::default() });
-    let len = glb.len();
-    runner
-        .run(&proptest::collection::vec((0..len, any::<u8>()), 1..8), |flips| {
-            let mut bytes = glb.clone();
-            for (at, v) in flips {
-                bytes[at] = v;
-            }
-            let _ = import(&bytes);
-            Ok(())
-        })
-        .expect("no panic");
 }
 
 #[test]

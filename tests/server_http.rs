@@ -147,9 +147,36 @@ async fn bad_inputs_get_their_4xx_and_harm_nothing() {
     let bystander = s.session(small("cornell-box")).await;
     let victim = s.session(small("bunnies-1")).await;
     let v = |p: &str| format!("/v1/sessions/{victim}{p}");
+    let cases = bad_cases(&victim);
+    assert!(cases.len() >= 30);
+    for case in &cases {
+        answers_with_its_4xx(&s, case).await;
+    }
+    // Too many sessions: the limit is 3 and two exist.
+    s.session(small("cornell-box")).await;
+    let r = s.http.post(s.url("/v1/sessions")).json(&small("cornell-box")).send().await.unwrap();
+    assert_eq!(r.status(), 429);
+    // The server is healthy, and both sessions still tick and answer.
+    assert_eq!(s.http.get(s.url("/healthz")).send().await.unwrap().status(), 200);
+    for id in [&bystander, &victim] {
+        let r = s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
+        assert_eq!(r.status(), 200, "session {id} harmed");
+    }
+    // Nothing from the rejected batches was queued: the victim's tick applied no edits.
+    let hist: Value = s.http.get(s.url(&v("/stats"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(hist["stats"][0]["edits_received"], 0);
+    let m = s.http.get(s.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    assert!(m.contains("relume_rejected_requests_total{reason=\"invalid\"}"));
+    s.shutdown().await.unwrap();
+}
+
+/// The bad requests: each is refused with its status and a detail naming what was wrong.
+/// `victim` is the session the per-session requests go to.
+fn bad_cases(victim: &str) -> Vec<BadCase> {
+    let v = |p: &str| format!("/v1/sessions/{victim}{p}");
     let huge = format!("{{\"edits\": [{}]}}", vec![r#"{"target":"camera","vfov_deg":40}"#; 3000].join(","));
     let many = format!("{{\"edits\": [{}]}}", [r#"{"target":"camera","vfov_deg":40}"#; 11].join(","));
-    let cases: Vec<BadCase> = vec![
+    vec![
         ("POST", "/v1/sessions".into(), Some("{".into()), 400, "EOF"),
         ("POST", "/v1/sessions".into(), Some("not json".into()), 400, "expected"),
         ("POST", "/v1/sessions".into(), Some("[]".into()), 422, "scene: missing"),
@@ -190,42 +217,27 @@ async fn bad_inputs_get_their_4xx_and_harm_nothing() {
         ("GET", v("/stats?n=0"), None, 422, "n:"),
         ("GET", v("/stats?n=99999"), None, 422, "n:"),
         ("GET", "/v2/anything".into(), None, 404, "no such route"),
-    ];
-    assert!(cases.len() >= 30);
-    for (method, path, body, status, words) in &cases {
-        let mut req = match *method {
-            "GET" => s.http.get(s.url(path)),
-            "POST" => s.http.post(s.url(path)),
-            _ => s.http.delete(s.url(path)),
-        };
-        if let Some(b) = body {
-            req = req.header("content-type", "application/json").body(b.clone());
-        }
-        let r = req.send().await.unwrap();
-        let got = r.status().as_u16();
-        let text = r.text().await.unwrap();
-        assert_eq!(got, *status, "{method} {path} {body:?}: {text}");
-        let v: Value = serde_json::from_str(&text).unwrap_or_else(|_| panic!("{method} {path}: not JSON: {text}"));
-        assert!(v["error"].is_string(), "{text}");
-        let detail = v["detail"].as_str().unwrap();
-        assert!(detail.contains(words), "{method} {path}: detail '{detail}' lacks '{words}'");
+    ]
+}
+
+/// Sends one bad request and checks its status and `{error, detail}` body.
+async fn answers_with_its_4xx(s: &TestServer, (method, path, body, status, words): &BadCase) {
+    let mut req = match *method {
+        "GET" => s.http.get(s.url(path)),
+        "POST" => s.http.post(s.url(path)),
+        _ => s.http.delete(s.url(path)),
+    };
+    if let Some(b) = body {
+        req = req.header("content-type", "application/json").body(b.clone());
     }
-    // Too many sessions: the limit is 3 and two exist.
-    s.session(small("cornell-box")).await;
-    let r = s.http.post(s.url("/v1/sessions")).json(&small("cornell-box")).send().await.unwrap();
-    assert_eq!(r.status(), 429);
-    // The server is healthy, and both sessions still tick and answer.
-    assert_eq!(s.http.get(s.url("/healthz")).send().await.unwrap().status(), 200);
-    for id in [&bystander, &victim] {
-        let r = s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
-        assert_eq!(r.status(), 200, "session {id} harmed");
-    }
-    // Nothing from the rejected batches was queued: the victim's tick applied no edits.
-    let hist: Value = s.http.get(s.url(&v("/stats"))).send().await.unwrap().json().await.unwrap();
-    assert_eq!(hist["stats"][0]["edits_received"], 0);
-    let m = s.http.get(s.url("/metrics")).send().await.unwrap().text().await.unwrap();
-    assert!(m.contains("relume_rejected_requests_total{reason=\"invalid\"}"));
-    s.shutdown().await.unwrap();
+    let r = req.send().await.unwrap();
+    let got = r.status().as_u16();
+    let text = r.text().await.unwrap();
+    assert_eq!(got, *status, "{method} {path} {body:?}: {text}");
+    let v: Value = serde_json::from_str(&text).unwrap_or_else(|_| panic!("{method} {path}: not JSON: {text}"));
+    assert!(v["error"].is_string(), "{text}");
+    let detail = v["detail"].as_str().unwrap();
+    assert!(detail.contains(words), "{method} {path}: detail '{detail}' lacks '{words}'");
 }
 
 /// Every client asking for the same frame shares one encoding: repeated GETs and WebSocket

@@ -148,12 +148,27 @@ async fn bad_snapshots_get_a_4xx_naming_the_field_and_cost_nothing() {
     let s = TestServer::start(None, limits).await;
     let id = s.session(json!({"scene": "cornell-box", "width": 16, "height": 16})).await;
     let snap = get(&s, &format!("/v1/sessions/{id}/snapshot")).await;
+    for (label, body, status, field) in bad_snapshots(&snap) {
+        let (got, err) = post(&s, "/v1/sessions", &body).await;
+        assert_eq!(got, status, "{label}: {err}");
+        assert!(err["detail"].as_str().unwrap_or_default().contains(field), "{label}: {err} does not name {field}");
+    }
+    truncated_and_oversize(&s, &snap).await;
+    // None of it cost a session or harmed the one there.
+    assert_eq!(s.state.session_count(), 1);
+    assert_eq!(post(&s, &format!("/v1/sessions/{id}/tick"), &Value::Null).await.0, 200);
+    s.shutdown().await.unwrap();
+}
+
+/// Broken variants of `snap`, each with its label, the status it must get and the text its
+/// `detail` must contain (the field it names).
+fn bad_snapshots(snap: &Value) -> Vec<(&'static str, Value, u16, &'static str)> {
     let with = |f: &dyn Fn(&mut Value)| {
         let mut v = snap.clone();
         f(&mut v);
         json!({ "snapshot": v })
     };
-    let cases: Vec<(&str, Value, u16, &str)> = vec![
+    vec![
         (
             "path escape",
             with(&|v| v["scene"]["objects"][0]["shape"]["path"] = json!("../../../etc/passwd")),
@@ -200,12 +215,12 @@ async fn bad_snapshots_get_a_4xx_naming_the_field_and_cost_nothing() {
             422,
             "scene: a restore takes only 'snapshot'",
         ),
-    ];
-    for (label, body, status, field) in cases {
-        let (got, err) = post(&s, "/v1/sessions", &body).await;
-        assert_eq!(got, status, "{label}: {err}");
-        assert!(err["detail"].as_str().unwrap_or_default().contains(field), "{label}: {err} does not name {field}");
-    }
+    ]
+}
+
+/// A truncated snapshot gets a 400 naming where it stopped; one whose scene holds more
+/// triangles than the server allows gets a 413 naming the scene.
+async fn truncated_and_oversize(s: &TestServer, snap: &Value) {
     // Truncated: malformed JSON, 400, naming where it stopped.
     let text = json!({ "snapshot": snap }).to_string();
     let r = s
@@ -223,13 +238,9 @@ async fn bad_snapshots_get_a_4xx_naming_the_field_and_cost_nothing() {
     let mut big = snap.clone();
     let tri = json!({"name": "extra", "shape": {"type": "mesh", "path": "meshes/bunny.obj"}, "material": "white"});
     big["scene"]["objects"].as_array_mut().unwrap().push(tri);
-    let (got, err) = post(&s, "/v1/sessions", &json!({ "snapshot": big })).await;
+    let (got, err) = post(s, "/v1/sessions", &json!({ "snapshot": big })).await;
     assert_eq!(got, 413, "{err}");
     assert!(err["detail"].as_str().unwrap().starts_with("snapshot.scene."), "{err}");
-    // None of it cost a session or harmed the one there.
-    assert_eq!(s.state.session_count(), 1);
-    assert_eq!(post(&s, &format!("/v1/sessions/{id}/tick"), &Value::Null).await.0, 200);
-    s.shutdown().await.unwrap();
 }
 
 /// The engine half of a restore, against a twin that never moved: the same scene state, the

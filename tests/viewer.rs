@@ -180,9 +180,19 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
     let (_driver, port) = start_driver().await;
     let c = browser(port).await;
     c.goto(&server.url("/")).await.unwrap();
+    runs_every_technique(&c, &server).await;
+    picks_by_click(&c, &server).await;
+    takes_a_dropped_glb(&c, &server).await;
+    c.close().await.unwrap();
+    server.shutdown().await.unwrap();
+}
+
+/// Each technique with its parameters from the registry (small counts keep it quick): the
+/// session gets the technique and the controls' values, and its ticks reach the plots.
+async fn runs_every_technique(c: &fantoccini::Client, server: &TestServer) {
     let ids = relume::technique::TECHNIQUE_IDS;
     wait_for(
-        &c,
+        c,
         "return document.querySelectorAll('#technique option').length",
         |v| v.as_u64() == Some(ids.len() as u64),
         "the technique list",
@@ -194,7 +204,6 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
     )
     .await
     .unwrap();
-    // Each technique with its parameters from the registry; small counts keep it quick.
     let small = [("paths", "20000"), ("particles", "4000"), ("vpls", "64")];
     for id in ids {
         c.execute(
@@ -204,7 +213,7 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
         )
         .await
         .unwrap();
-        let session = start_and_wait(&c).await;
+        let session = start_and_wait(c).await;
         let view = server.get_json(&format!("/v1/sessions/{session}")).await;
         assert_eq!(view["technique"]["id"], *id, "{view}");
         for (k, v) in small {
@@ -212,9 +221,13 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
                 assert_eq!(view["technique"][k].to_string(), v, "{id}: the {k} control did not reach the session");
             }
         }
-        wait_for(&c, "return window.relume.history.length", |v| v.as_u64() >= Some(1), "ticks in the plots").await;
+        wait_for(c, "return window.relume.history.length", |v| v.as_u64() >= Some(1), "ticks in the plots").await;
     }
-    // Click to pick: bunnies-2 has two moving bunnies; find a pixel over the one not selected.
+}
+
+/// Click to pick: bunnies-2 has two moving bunnies; a click on a pixel over the one not
+/// selected selects it.
+async fn picks_by_click(c: &fantoccini::Client, server: &TestServer) {
     c.execute(
         "document.getElementById('scene').value = 'bunnies-2'; const t = document.getElementById('technique'); \
                t.value = 'path'; t.dispatchEvent(new Event('change'));",
@@ -222,7 +235,7 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
     )
     .await
     .unwrap();
-    let session = start_and_wait(&c).await;
+    let session = start_and_wait(c).await;
     let view = server.get_json(&format!("/v1/sessions/{session}")).await;
     assert_eq!((view["scene"].as_str(), view["width"].as_u64()), (Some("bunnies-2"), Some(128)), "{view}");
     let selected = c.execute("return document.getElementById('target').value", vec![]).await.unwrap();
@@ -248,8 +261,11 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
         .then(PointerAction::Up { button: MOUSE_BUTTON_LEFT });
     c.perform_actions(click).await.unwrap();
     let want = json!(format!("object/{name}"));
-    wait_for(&c, "return document.getElementById('target').value", |v| *v == want, "the clicked bunny selected").await;
-    // Drop a .glb: the page starts a session on it (inline) and frames arrive.
+    wait_for(c, "return document.getElementById('target').value", |v| *v == want, "the clicked bunny selected").await;
+}
+
+/// Drop a .glb: the page starts a session on it (inline) and frames arrive.
+async fn takes_a_dropped_glb(c: &fantoccini::Client, server: &TestServer) {
     let glb = std::fs::read(common::scenes_dir().join("cornell-box.glb")).unwrap();
     let b64 = base64::Engine::encode(&base64::engine::general_purpose::STANDARD, glb);
     let before = c.execute("return window.relume.id", vec![]).await.unwrap();
@@ -261,7 +277,7 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
     .await
     .unwrap();
     let dropped = wait_for(
-        &c,
+        c,
         "return [window.relume.id, window.relume.frames]",
         |v| v[0] != before && !v[0].is_null(),
         "the dropped scene's session",
@@ -271,8 +287,5 @@ async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb(
     let view = server.get_json(&format!("/v1/sessions/{id}")).await;
     assert_eq!(view["scene"], "inline", "{view}");
     let frames = dropped[1].as_u64().unwrap();
-    wait_for(&c, "return window.relume.frames", |v| v.as_u64() >= Some(frames + 2), "frames of the dropped scene")
-        .await;
-    c.close().await.unwrap();
-    server.shutdown().await.unwrap();
+    wait_for(c, "return window.relume.frames", |v| v.as_u64() >= Some(frames + 2), "frames of the dropped scene").await;
 }

@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests: load bundled scenes and run sessions on real Embree.
 #![allow(dead_code)]
+pub mod gltf_doc;
 pub mod process;
 pub mod server;
 pub mod ws;
