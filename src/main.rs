@@ -7,7 +7,7 @@
 //! - `relume export SCENE.json --out SCENE.glb [--anim NAME.anim.json]…`
 //! - `relume bench rays SCENE.json [--json FILE]`
 //! - `relume bench reuse SCENE.json --anim NAME.anim.json --frames F [--paths N[,N2…]] [--json FILE]`
-//! - `relume bench icache SCENE.json --anim NAME.anim.json --frames F [--vpls N] [--audit] [--json FILE]`
+//! - `relume bench icache SCENE.json --anim NAME.anim.json --frames F [--vpls N] [--modes M,…] [--audit] [--plot DIR] [--json FILE]`
 //! - `relume bench particles SCENE.json [--anim NAME.anim.json --frames F] [--particles N] [--json FILE]`
 //! - `relume bench error SCENE.json [--anim NAME.anim.json --frames F --every K] --techniques LIST [--ref-spp S] [--out DIR]`
 //! - `relume bench fairness [--url URL] [--scene NAME] [--technique SPEC] [--hz H] [--spammers K] [--duration 15s]`

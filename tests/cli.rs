@@ -253,10 +253,24 @@ fn bench_reuse_reports_each_mode_with_the_named_fields() {
 fn bench_icache_runs_the_modes_asked_and_splits_the_tick_by_stage() {
     // Property: `--modes` picks the modes and their order (a repeat runs once), and each frame's
     // new-record time is a part of its indirect pixel time (it is timed inside it), zero for
-    // `igi`, which makes no records. Negative controls, by hand: ignoring `--modes` runs all four
-    // modes; timing records around the whole pass makes `records_ms` exceed `indirect_ms`.
-    let args = ["--frames", "4", "--vpls", "32", "--width", "24", "--height", "24", "--threads", "1"];
-    let v = bench_bunnies("icache", &[&args[..], &["--modes", "temporal,igi,temporal"]].concat());
+    // `igi`, which makes no records. `--plot` creates its directory and draws both plots, as
+    // PNG and SVG, with a legend entry for each mode run and none for a mode not run. Negative
+    // controls, by hand: ignoring `--modes` runs all four modes; timing records around the
+    // whole pass makes `records_ms` exceed `indirect_ms`; plotting only the first mode leaves
+    // `igi` out of the SVGs.
+    let plots = out_dir("icache-plots").join("new/dir");
+    let args = ["--frames", "4", "--vpls", "32", "--width", "24", "--height", "24", "--threads", "1", "--plot"];
+    let modes = ["--modes", "temporal,igi,temporal"];
+    let v = bench_bunnies("icache", &[&args[..], &[plots.to_str().unwrap()], &modes].concat());
+    for stem in ["icache_indirect_by_frame", "icache_stages"] {
+        let png = image::open(plots.join(format!("{stem}.png"))).unwrap_or_else(|e| panic!("{stem}.png: {e}"));
+        assert!(png.width() >= 640 && png.height() >= 400, "{stem}.png is {}x{}", png.width(), png.height());
+        let svg = std::fs::read_to_string(plots.join(format!("{stem}.svg"))).unwrap();
+        for (mode, drawn) in [("temporal", true), ("igi", true), ("static", false)] {
+            // plotters writes each text element's string on a line of its own.
+            assert_eq!(svg.contains(&format!("\n{mode}\n")), drawn, "{stem}.svg and the mode {mode}");
+        }
+    }
     let modes = v["modes"].as_array().unwrap();
     assert_eq!(modes.iter().map(|m| m["mode"].as_str().unwrap()).collect::<Vec<_>>(), ["temporal", "igi"]);
     for m in modes {

@@ -8,7 +8,9 @@
 //! and filter): what the paper's Table 4 times. The tick is also split by stage: camera samples
 //! and direct light, then the indirect stages, with the time spent computing records apart.
 //! `--audit` recomputes every record after each frame and reports the records that differ from
-//! a fresh computation (it should be 0; it slows the run down).
+//! a fresh computation (it should be 0; it slows the run down). `--plot DIR` draws the indirect
+//! time of every frame and the stage split, per mode.
+use super::plot::{write_both, Lines, StackedBars};
 use super::{progress_bar, quantile, AnimationArgs};
 use crate::technique::instant_cache::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation};
 use crate::technique::{TechniqueConfig, TechniqueStats};
@@ -35,6 +37,11 @@ pub struct IcacheArgs {
     /// `static`).
     #[arg(long, value_delimiter = ',', default_values_t = Mode::ALL)]
     pub modes: Vec<Mode>,
+    /// Also draw the run into DIR (created if missing), as PNG and SVG: `icache_indirect_by_frame`
+    /// (each mode's indirect milliseconds per frame, frame 0 building everything) and
+    /// `icache_stages` (each mode's median tick by stage).
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<std::path::PathBuf>,
 }
 
 /// A configuration `bench icache` compares.
@@ -282,8 +289,38 @@ pub fn print_table(r: &IcacheReport, audit: bool) {
     }
 }
 
+/// Writes `--plot`'s two plots into `dir`.
+fn plot(dir: &std::path::Path, r: &IcacheReport) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("--plot {}: {e}", dir.display()))?;
+    let series = r
+        .modes
+        .iter()
+        .map(|m| {
+            let frames = std::iter::once(&m.initial).chain(&m.frames);
+            (m.mode.clone(), frames.enumerate().map(|(i, f)| (i as f64, f.indirect_ms)).collect())
+        })
+        .collect();
+    let caption = format!("Indirect light per frame ({}x{}, {} VPLs)", r.width, r.height, r.vpls);
+    write_both(dir, "icache_indirect_by_frame", &Lines { caption, unit: "ms".into(), series })?;
+    let stages = ["camera and direct light", "shoot VPLs", "invalidate", "pixels less records", "records"];
+    let bars = r
+        .modes
+        .iter()
+        .map(|m| {
+            let s = &m.summary.stage_ms_median;
+            (m.mode.clone(), vec![s.camera, s.vpls, s.invalidate, (s.pixels - s.records).max(0.0), s.records])
+        })
+        .collect();
+    let caption = "Median tick by stage (frames 1 on)".to_string();
+    write_both(dir, "icache_stages", &StackedBars { caption, stages: stages.map(String::from).to_vec(), bars })
+}
+
 pub fn run(args: IcacheArgs) -> Result<()> {
     let report = measure(&args)?;
     print_table(&report, args.audit);
+    if let Some(dir) = &args.plot {
+        plot(dir, &report)?;
+        println!("  plots: {}", dir.join("icache_{indirect_by_frame,stages}.{png,svg}").display());
+    }
     super::write_json_report(args.run.json.as_deref(), &report)
 }

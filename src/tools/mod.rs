@@ -9,6 +9,7 @@ pub mod bench_reuse;
 pub mod export;
 pub mod load;
 pub mod migrate;
+pub mod plot;
 pub mod render;
 pub mod serve;
 

@@ -1,0 +1,154 @@
+//! The plots the benchmarks write, each as PNG and SVG (plotters): a value per frame as one line
+//! per configuration ([`Lines`]), and a median time per stage as one stacked bar per
+//! configuration ([`StackedBars`]). `bench error` and `bench icache` draw their data with them.
+use anyhow::{anyhow, Result};
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use std::path::Path;
+
+const SIZE: (u32, u32) = (960, 600);
+
+/// The `i`-th colour of an eight-colour palette (matplotlib's first eight), repeating.
+pub fn colour(i: usize) -> RGBColor {
+    const PALETTE: [RGBColor; 8] = [
+        RGBColor(31, 119, 180),
+        RGBColor(255, 127, 14),
+        RGBColor(44, 160, 44),
+        RGBColor(214, 39, 40),
+        RGBColor(148, 103, 189),
+        RGBColor(140, 86, 75),
+        RGBColor(227, 119, 194),
+        RGBColor(127, 127, 127),
+    ];
+    PALETTE[i % PALETTE.len()]
+}
+
+/// A plotting error as an `anyhow` error.
+pub fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
+    anyhow!("plotting: {e}")
+}
+
+/// A plot that can be drawn on any plotters backend.
+pub trait Plot {
+    fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<()>;
+}
+
+/// Draws `plot` into `<stem>.png` and `<stem>.svg` under `dir`.
+pub fn write_both<P: Plot>(dir: &Path, stem: &str, plot: &P) -> Result<()> {
+    let png = dir.join(format!("{stem}.png"));
+    let root = BitMapBackend::new(&png, SIZE).into_drawing_area();
+    plot.draw(&root)?;
+    root.present().map_err(err)?;
+    let svg = dir.join(format!("{stem}.svg"));
+    let root = SVGBackend::new(&svg, SIZE).into_drawing_area();
+    plot.draw(&root)?;
+    root.present().map_err(err)?;
+    Ok(())
+}
+
+/// The legend every plot draws, top right.
+pub fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(chart: &mut ChartContext<'a, DB, CT>) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(err)
+}
+
+/// A positive value per frame, one line per configuration, on a log scale.
+pub struct Lines {
+    pub caption: String,
+    /// What the values are, for the y axis.
+    pub unit: String,
+    /// Per configuration: its label and its (frame, value) points; values ≤ 0 are left out.
+    pub series: Vec<(String, Vec<(f64, f64)>)>,
+}
+
+impl Plot for Lines {
+    fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<()> {
+        area.fill(&WHITE).map_err(err)?;
+        let points = || self.series.iter().flat_map(|(_, p)| p.iter()).filter(|p| p.1 > 0.0);
+        let frames = points().map(|p| p.0).fold(0.0, f64::max) + 1.0;
+        let hi = points().map(|p| p.1).fold(f64::MIN_POSITIVE, f64::max) * 2.0;
+        let lo = points().map(|p| p.1).fold(hi, f64::min) / 2.0;
+        let mut chart = ChartBuilder::on(area)
+            .caption(&self.caption, ("sans-serif", 22))
+            .margin(16)
+            .x_label_area_size(44)
+            .y_label_area_size(72)
+            .build_cartesian_2d(0.0..frames, (lo..hi).log_scale())
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc("frame")
+            .y_desc(format!("{} (log)", self.unit))
+            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .draw()
+            .map_err(err)?;
+        for (i, (label, points)) in self.series.iter().enumerate() {
+            let c = colour(i);
+            let points = points.iter().copied().filter(|p| p.1 > 0.0);
+            chart
+                .draw_series(LineSeries::new(points, ShapeStyle::from(&c).stroke_width(2)))
+                .map_err(err)?
+                .label(label.clone())
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
+        }
+        legend(&mut chart)
+    }
+}
+
+/// Median milliseconds per stage, one bar per configuration with its stages stacked.
+pub struct StackedBars {
+    pub caption: String,
+    /// The stages, bottom to top.
+    pub stages: Vec<String>,
+    /// Per configuration: its label and its milliseconds per stage, in `stages` order.
+    pub bars: Vec<(String, Vec<f64>)>,
+}
+
+impl Plot for StackedBars {
+    fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<()> {
+        area.fill(&WHITE).map_err(err)?;
+        let n = self.bars.len();
+        let t_max = self.bars.iter().map(|(_, ms)| ms.iter().sum::<f64>()).fold(1e-3, f64::max) * 1.25;
+        let mut chart = ChartBuilder::on(area)
+            .caption(&self.caption, ("sans-serif", 22))
+            .margin(16)
+            .x_label_area_size(44)
+            .y_label_area_size(64)
+            .build_cartesian_2d(0.0..n as f64, 0.0..t_max)
+            .map_err(err)?;
+        // One bar per configuration, centred on i + 0.5, where its label goes.
+        let label_at = |v: &f64| {
+            let i = v - 0.5;
+            let on_bar = (i - i.round()).abs() < 1e-6 && i >= 0.0;
+            on_bar.then(|| self.bars.get(i.round() as usize).map(|b| b.0.clone())).flatten().unwrap_or_default()
+        };
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(2 * n + 1)
+            .x_desc("configuration")
+            .y_desc("ms")
+            .x_label_formatter(&label_at)
+            .draw()
+            .map_err(err)?;
+        for (k, stage) in self.stages.iter().enumerate() {
+            let c = colour(k);
+            let bars = self.bars.iter().enumerate().map(|(i, (_, ms))| {
+                let below: f64 = ms[..k.min(ms.len())].iter().sum();
+                let mine = ms.get(k).copied().unwrap_or(0.0);
+                Rectangle::new([(i as f64 + 0.2, below), (i as f64 + 0.8, below + mine)], c.mix(0.85).filled())
+            });
+            chart
+                .draw_series(bars)
+                .map_err(err)?
+                .label(stage.clone())
+                .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], c.filled()));
+        }
+        legend(&mut chart)
+    }
+}
