@@ -300,6 +300,15 @@ fn bench_icache_runs_the_modes_asked_and_splits_the_tick_by_stage() {
         .unwrap();
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("temporal-on-demand"), "the error lists the modes");
+    // A plot directory that cannot be made is a usage error naming `--plot`.
+    let bad = relume()
+        .args(["bench", "icache", scene("bunnies-1.json").to_str().unwrap(), "--anim"])
+        .arg(scene("bunnies-1.anim.json"))
+        .args(["--plot", "/proc/relume-plots"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--plot /proc/relume-plots"), "the error names --plot");
 }
 
 #[test]

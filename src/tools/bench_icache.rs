@@ -11,7 +11,7 @@
 //! a fresh computation (it should be 0; it slows the run down). `--plot DIR` draws the indirect
 //! time of every frame and the stage split, per mode.
 use super::plot::{write_both, Lines, StackedBars};
-use super::{progress_bar, quantile, AnimationArgs};
+use super::{progress_bar, quantile, AnimationArgs, UsageError};
 use crate::technique::instant_cache::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation};
 use crate::technique::{TechniqueConfig, TechniqueStats};
 use anyhow::Result;
@@ -289,9 +289,8 @@ pub fn print_table(r: &IcacheReport, audit: bool) {
     }
 }
 
-/// Writes `--plot`'s two plots into `dir`.
+/// Writes `--plot`'s two plots into `dir`, which exists.
 fn plot(dir: &std::path::Path, r: &IcacheReport) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| anyhow::anyhow!("--plot {}: {e}", dir.display()))?;
     let series = r
         .modes
         .iter()
@@ -316,11 +315,16 @@ fn plot(dir: &std::path::Path, r: &IcacheReport) -> Result<()> {
 }
 
 pub fn run(args: IcacheArgs) -> Result<()> {
+    // A directory that cannot be made fails now, not after the run.
+    if let Some(dir) = &args.plot {
+        std::fs::create_dir_all(dir).map_err(|e| UsageError(format!("--plot {}: {e}", dir.display())))?;
+    }
     let report = measure(&args)?;
     print_table(&report, args.audit);
+    super::write_json_report(args.run.json.as_deref(), &report)?;
     if let Some(dir) = &args.plot {
         plot(dir, &report)?;
-        println!("  plots: {}", dir.join("icache_{indirect_by_frame,stages}.{png,svg}").display());
+        println!("  wrote the plots to {}", dir.display());
     }
-    super::write_json_report(args.run.json.as_deref(), &report)
+    Ok(())
 }
