@@ -1,6 +1,6 @@
 //! glTF 2.0 import on hand-built files: each feature the importer reads (node hierarchies,
-//! materials, punctual lights and the camera, animations, external buffers), and bad or
-//! mangled files, each refused with an error naming the part and never a panic.
+//! materials, punctual lights and the camera, animations), and bad or mangled files, each
+//! refused with an error naming the part and never a panic.
 mod common;
 use common::gltf_doc::{animated_doc, animated_doc_with, build, close, import, materials_doc, world_vertices, Doc};
 use glam::{Mat4, Quat, Vec3};
@@ -8,6 +8,7 @@ use relume::scene::edits::Edit;
 use relume::scene::gltf::export_glb;
 use relume::scene::{LightGeometry, Material};
 use serde_json::{json, Value};
+
 #[test]
 fn nested_node_transforms_compose_into_world_positions() {
     let mut doc = Doc::default();

@@ -25,6 +25,8 @@ pub struct Doc {
 }
 
 impl Doc {
+    /// Appends `v` as a buffer view and an accessor of type `kind` (`SCALAR`, `VEC3` or
+    /// `VEC4`, with bounds for the first two); returns the accessor's index.
     pub fn floats(&mut self, v: &[f32], kind: &str) -> usize {
         let offset = self.bin.len();
         self.bin.extend(v.iter().flat_map(|x| x.to_le_bytes()));
@@ -61,6 +63,7 @@ impl Doc {
         json!({"primitives": [prim]})
     }
 
+    /// The document `root` with the asset, the buffer and its views and accessors, as JSON.
     pub fn finish(self, mut root: Value) -> Vec<u8> {
         let uri = format!(
             "data:application/octet-stream;base64,{}",
