@@ -15,6 +15,7 @@ use std::path::Path;
 
 const STAGES: [&str; 4] = ["apply_commit", "update", "render", "resolve"];
 
+/// Writes the four plots into `dir`.
 pub fn write_all(dir: &Path, r: &ErrorReport) -> Result<()> {
     write_both(dir, "time_vs_error", &TimeVsError(r))?;
     // A frame that traced no ray is drawn at 1, the bottom of the log scale.
