@@ -292,23 +292,21 @@ fn bench_icache_runs_the_modes_asked_and_splits_the_tick_by_stage() {
             assert!(m["summary"]["stage_ms_median"][key].is_f64(), "stage_ms_median.{key}");
         }
     }
-    let bad = relume()
-        .args(["bench", "icache", scene("bunnies-1.json").to_str().unwrap(), "--anim"])
-        .arg(scene("bunnies-1.anim.json"))
-        .args(["--modes", "temporal,fast"])
-        .output()
-        .unwrap();
-    assert_eq!(bad.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("temporal-on-demand"), "the error lists the modes");
+    // Bad arguments exit 2 with a message: the stderr of `bench icache` on bunnies-1 with `extra`.
+    let refused = |extra: [&str; 2]| {
+        let out = relume()
+            .args(["bench", "icache", scene("bunnies-1.json").to_str().unwrap(), "--anim"])
+            .arg(scene("bunnies-1.anim.json"))
+            .args(extra)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{extra:?}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    assert!(refused(["--modes", "temporal,fast"]).contains("temporal-on-demand"), "the error lists the modes");
     // A plot directory that cannot be made is a usage error naming `--plot`.
-    let bad = relume()
-        .args(["bench", "icache", scene("bunnies-1.json").to_str().unwrap(), "--anim"])
-        .arg(scene("bunnies-1.anim.json"))
-        .args(["--plot", "/proc/relume-plots"])
-        .output()
-        .unwrap();
-    assert_eq!(bad.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("--plot /proc/relume-plots"), "the error names --plot");
+    let plot = refused(["--plot", "/proc/relume-plots"]);
+    assert!(plot.contains("--plot /proc/relume-plots"), "the error names --plot: {plot}");
 }
 
 #[test]
