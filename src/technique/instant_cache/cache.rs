@@ -197,8 +197,9 @@ impl Cache {
             return None;
         }
         let inverse = d2.sqrt() / reach + (1.0 - n.dot(normal)).max(0.0).sqrt() * self.normal_scale;
-        // A NaN passes, as it did before this test was a function of its own, so lists keep
-        // their bits.
+        // A NaN (from a degenerate normal) is not rejected: records are ruled out only by
+        // `inverse ≥ 1`, and the full lookup and the new-record append share this test, so
+        // they agree on such a record too.
         (inverse < 1.0 || inverse.is_nan()).then(|| 1.0 / inverse.max(1e-12))
     }
 
