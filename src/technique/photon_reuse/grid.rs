@@ -36,7 +36,7 @@ pub struct GridPhoton {
     pub facing: Vec3,
     pub power: Rgb,
     /// `path · B + row`.
-    key: u32,
+    pub(super) key: u32,
 }
 
 impl GridPhoton {
@@ -97,8 +97,7 @@ impl Hasher for CellHasher {
 }
 
 /// A map keyed by cell coordinates, with the cheap hash.
-pub type CellIndex<V> = HashMap<[i32; 3], V, BuildHasherDefault<CellHasher>>;
-type CellMap = CellIndex<u32>;
+type CellMap = HashMap<[i32; 3], u32, BuildHasherDefault<CellHasher>>;
 
 /// One cell's share of an update: its slot, the keys leaving it and the photons entering it.
 type CellChange<'a> = (u32, &'a [(u32, u32)], &'a [(u32, GridPhoton)]);

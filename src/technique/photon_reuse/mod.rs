@@ -89,6 +89,7 @@ mod gather;
 mod grid;
 mod grid_upkeep;
 mod lights;
+mod near;
 mod pixels;
 mod stats;
 mod store;

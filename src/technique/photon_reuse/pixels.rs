@@ -23,7 +23,8 @@
 //! edge may keep, from earlier passes, a little of the far surface's old indirect light until
 //! its next restart. Memory: one [`PixelSample`] and its footprint per pixel.
 use super::gather::{self, PixelSample, RenderRays};
-use super::grid::{cell_of, CellIndex, ChangedPhotons, GridPhoton, PhotonGrid};
+use super::grid::{ChangedPhotons, PhotonGrid};
+use super::near::NearPhotons;
 use crate::core::Rng;
 use crate::film::Film;
 use crate::scene::edits::Aabb;
@@ -239,9 +240,9 @@ impl PixelCache {
     }
 
     /// Splats the removed (−) and added (+) photons into the photon sums of every pixel not
-    /// being resampled, pixel by pixel through a grid of only the changed photons (so the work
-    /// is a lookup per pixel plus the terms near it). Returns which pixels a photon reached
-    /// (within r plus the pixel's footprint).
+    /// being resampled, pixel by pixel through an index of only the changed photons
+    /// ([`NearPhotons`], so the work is a few cells per pixel plus the terms near it). Returns
+    /// which pixels a photon reached (within r plus the pixel's footprint).
     fn splat(
         &mut self,
         scene: &Scene,
@@ -250,15 +251,11 @@ impl PixelCache {
         fates: &[Fate],
         counts: &mut FollowCounts,
     ) -> Vec<bool> {
-        let mut near: CellIndex<Vec<(GridPhoton, f64)>> = CellIndex::default();
         let signed = changed.removed.iter().map(|p| (*p, -1.0)).chain(changed.added.iter().map(|p| (*p, 1.0)));
-        for (photon, sign) in signed {
-            near.entry(cell_of(photon.position, grid.inv_cell)).or_default().push((photon, sign));
-        }
-        if near.is_empty() {
+        let Some(near) = NearPhotons::new(signed.collect(), 2.0 * grid.radius) else {
             return vec![false; self.samples.len()];
-        }
-        let (r, r2) = (grid.radius, grid.radius * grid.radius);
+        };
+        let r2 = grid.radius * grid.radius;
         let found: Vec<(bool, u64)> = self
             .samples
             .par_iter_mut()
@@ -266,27 +263,22 @@ impl PixelCache {
             .zip(fates)
             .map(|((s, &reach), &fate)| {
                 let Some(hit) = s.hit.filter(|_| fate != Fate::Resampled) else { return (false, 0) };
-                let (lo, hi) = cell_range(hit.p, r + reach, grid.inv_cell);
+                let within = grid.radius + reach;
                 let (material, side) = (hit.material(scene), hit.facing());
                 let (mut touched, mut terms) = (false, 0);
-                for z in lo[2]..=hi[2] {
-                    for y in lo[1]..=hi[1] {
-                        for x in lo[0]..=hi[0] {
-                            let Some(photons) = near.get(&[x, y, z]) else { continue };
-                            for (photon, sign) in photons {
-                                if (photon.position - hit.p).length_squared() > (r + reach) * (r + reach) {
-                                    continue;
-                                }
-                                touched = true;
-                                if let Some(t) = photon.term(material, hit.p, hit.n, hit.wo, side, r2) {
-                                    let i = &mut s.indirect;
-                                    *i = [i[0] + t.r as f64 * sign, i[1] + t.g as f64 * sign, i[2] + t.b as f64 * sign];
-                                    terms += 1;
-                                }
-                            }
+                near.around(hit.p, within, |positions, photons| {
+                    for (q, (photon, sign)) in positions.iter().zip(photons) {
+                        if (*q - hit.p).length_squared() > within * within {
+                            continue;
+                        }
+                        touched = true;
+                        if let Some(t) = photon.term(material, hit.p, hit.n, hit.wo, side, r2) {
+                            let i = &mut s.indirect;
+                            *i = [i[0] + t.r as f64 * sign, i[1] + t.g as f64 * sign, i[2] + t.b as f64 * sign];
+                            terms += 1;
                         }
                     }
-                }
+                });
                 (touched, terms)
             })
             .collect();
@@ -300,11 +292,6 @@ impl PixelCache {
     pub fn samples(&self) -> &[PixelSample] {
         &self.samples
     }
-}
-
-/// The grid cells a sphere of radius `reach` around `p` overlaps (inclusive corners).
-fn cell_range(p: Vec3, reach: f32, inv_cell: f32) -> ([i32; 3], [i32; 3]) {
-    (cell_of(p - Vec3::splat(reach), inv_cell), cell_of(p + Vec3::splat(reach), inv_cell))
 }
 
 /// How far another sample of the same pixel may land from `s`'s hit on its surface.
