@@ -134,11 +134,8 @@ mod tests {
                 };
                 let mut handed = Vec::new();
                 near.around(q, reach, |_, ps| handed.extend(ps.iter().map(|(p, _)| p.key)));
-                let within: Vec<u32> = photons
-                    .iter()
-                    .filter(|(p, _)| (p.position - q).length() <= reach)
-                    .map(|(p, _)| p.key)
-                    .collect();
+                let within: Vec<u32> =
+                    photons.iter().filter(|(p, _)| (p.position - q).length() <= reach).map(|(p, _)| p.key).collect();
                 found_any += within.len();
                 for key in &within {
                     assert!(handed.contains(key), "photon {key} within {reach} of {q:?} not handed over");
