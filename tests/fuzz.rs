@@ -6,7 +6,8 @@
 //! checks that the input is either accepted or refused with an error naming a field, never a
 //! panic; against the server, that no answer is a 5xx and the server keeps serving. Values are
 //! drawn to hit the validators' edges: huge and negative numbers, zero, wrong types, long
-//! strings, nested containers. JSON has no NaN or Inf; 1e308 and -1e308 stand in for them.
+//! strings, nested containers. JSON has no NaN or Inf; 1e308 and -1e308 stand in for them, and
+//! 3e38 and 1e-30 are finite in f32 but overflow or vanish in what is computed from them.
 //!
 //! CI runs a fixed-seed slice of a few seconds (`PROPTEST_CASES` unset: the counts below);
 //! `scripts/fuzz.sh` runs over a million cases with fresh seeds.
@@ -44,8 +45,18 @@ fn probe() -> impl Strategy<Value = Value> {
     let leaf = prop_oneof![
         Just(Value::Null),
         any::<bool>().prop_map(Value::from),
-        prop_oneof![Just(0.0), Just(-1.0), Just(1e308), Just(-1e308), Just(1e-300), Just(4096.0), Just(1e9)]
-            .prop_map(|f: f64| json!(f)),
+        prop_oneof![
+            Just(0.0),
+            Just(-1.0),
+            Just(1e308),
+            Just(-1e308),
+            Just(1e-300),
+            Just(4096.0),
+            Just(1e9),
+            Just(3e38),
+            Just(1e-30)
+        ]
+        .prop_map(|f: f64| json!(f)),
         any::<i64>().prop_map(Value::from),
         any::<u32>().prop_map(Value::from),
         (-10.0f64..10.0).prop_map(|f| json!(f)),

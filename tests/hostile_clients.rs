@@ -430,3 +430,50 @@ async fn a_client_flooding_a_busy_session_gets_429_and_the_queue_stays_bounded()
     // The session is healthy once the queue drains.
     assert_eq!(post(&s, &path, edit).await.0, 202);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn edits_that_overflow_world_space_are_refused_and_the_largest_accepted_ones_render() {
+    // Hazard: a finite but huge edit (translation 3e38, scale 1e30, radiance 3e38) was accepted.
+    // The bunny's area overflowed; `particle_gi` derived its particle spacing from it and asked
+    // for 34 GB, and the failed allocation aborted the whole server with every session in it.
+    // Coordinates, scales and emission are now bounded where edits are validated; at the bounds,
+    // every technique still ticks and the server keeps serving.
+    let s = TestServer::start(None, Limits::default()).await;
+    let object = |transform: Value| json!({"edits": [{"target": "object", "name": "bunny-1", "transform": transform}]});
+    let refused = [
+        (object(json!({"translation": [3e38, 0, 0]})), "edits[0].transform.translation[0]"),
+        (object(json!({"scale": [1e30, 1, 1]})), "edits[0].transform.scale[0]"),
+        (object(json!({"scale": [1, 1e-30, 1]})), "edits[0].transform.scale[1]"),
+        // Each part within its bound, the bunny's far side (0.51 from its origin) beyond 1e8.
+        (object(json!({"translation": [9.99e7, 0, 0], "scale": [1e6, 1e6, 1e6]})), "edits[0].transform"),
+        (
+            json!({"edits": [{"target": "light", "name": "ceiling-light", "emitter": {"type": "rect", "radiance": [3e38, 1, 1]}}]}),
+            "edits[0].emitter.radiance",
+        ),
+        (json!({"edits": [{"target": "camera", "position": [0, -2e8, 0]}]}), "edits[0].camera.position[1]"),
+    ];
+    for config in common::small_techniques() {
+        let spec = serde_json::to_value(&config).expect("spec");
+        let id = s.session(json!({"scene": "bunnies-1", "width": 16, "height": 16, "technique": spec})).await;
+        let (edits, tick) = (format!("/v1/sessions/{id}/edits"), format!("/v1/sessions/{id}/tick"));
+        for (body, field) in &refused {
+            let (status, answer) = post(&s, &edits, body.clone()).await;
+            assert_eq!(status, 422, "{}: {body} → {answer}", config.id());
+            let detail = answer["detail"].as_str().unwrap_or_default();
+            assert!(detail.starts_with(&format!("{field}:")), "{}: {body} → {answer}", config.id());
+        }
+        let largest = json!({"edits": [
+            {"target": "object", "name": "bunny-1", "transform": {"translation": [9.9e7, 0, 0], "scale": [1e6, 1e6, 1e6]}},
+            {"target": "light", "name": "ceiling-light", "emitter": {"type": "rect", "radiance": [1e20, 1e20, 1e20]}}
+        ]});
+        let (status, answer) = post(&s, &edits, largest).await;
+        assert_eq!(status, 202, "{}: {answer}", config.id());
+        let (status, answer) = post(&s, &tick, json!({})).await;
+        assert_eq!(status, 200, "{}: {answer}", config.id());
+        let r = s.http.delete(s.url(&format!("/v1/sessions/{id}"))).send().await.expect("delete");
+        assert_eq!(r.status().as_u16(), 204);
+    }
+    let healthy = s.http.get(s.url("/healthz")).send().await.map(|r| r.status().as_u16());
+    assert_eq!(healthy.ok(), Some(200));
+    s.shutdown().await.unwrap();
+}

@@ -174,3 +174,29 @@ fn physical_ranges_are_enforced() {
     let r = load_with("fov", |v| v["camera"]["vfov_deg"] = serde_json::json!(180));
     expect_error(r, "camera.vfov_deg", "outside (0, 180)");
 }
+
+#[test]
+fn world_coordinates_scales_and_emission_are_bounded() {
+    // Beyond these, areas and light power overflow f32 (the hazard is in
+    // `tests/hostile_clients.rs`). The mesh is a unit triangle.
+    let r = load_with("far", |v| v["objects"][0]["transform"] = serde_json::json!({"translation": [0, 2e8, 0]}));
+    expect_error(r, "objects[0].transform.translation[1]", "largest world coordinate");
+    let r = load_with("huge", |v| v["objects"][0]["transform"] = serde_json::json!({"scale": [1, 1, 1e7]}));
+    expect_error(r, "objects[0].transform.scale[2]", "magnitude");
+    let r = load_with("tiny", |v| v["objects"][0]["transform"] = serde_json::json!({"scale": [-1e-7, 1, 1]}));
+    expect_error(r, "objects[0].transform.scale[0]", "magnitude");
+    let r = load_with("reach", |v| {
+        v["objects"][0]["transform"] = serde_json::json!({"translation": [9.95e7, 0, 0], "scale": [1e6, 1, 1]})
+    });
+    expect_error(r, "objects[0].transform", "largest world coordinate");
+    let r = load_with("eye", |v| v["camera"]["position"] = serde_json::json!([0, 0, 1e9]));
+    expect_error(r, "camera.position[2]", "largest world coordinate");
+    let r = load_with("sun", |v| v["lights"][0]["emitter"]["intensity"] = serde_json::json!([1e21, 1, 1]));
+    expect_error(r, "lights[0].emitter.intensity", "largest emission");
+    // At the bounds, and mirrored, the scene loads.
+    let r = load_with("edge", |v| {
+        v["objects"][0]["transform"] = serde_json::json!({"translation": [9.8e7, -1e8, 0], "scale": [-1e6, 1e-6, 1]});
+        v["lights"][0]["emitter"]["intensity"] = serde_json::json!([1e20, 0, 0]);
+    });
+    assert!(r.is_ok(), "{:?}", r.err());
+}

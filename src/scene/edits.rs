@@ -12,7 +12,7 @@
 //! same fields, a material with the same parameters. It is counted in
 //! [`SceneDelta::unchanged`] and goes no further: no film reset, no commit, no invalidation.
 //! Animation players re-send every track every frame, so a held pose costs nothing.
-use super::load::{validate_emitter, validate_material, validate_trs, SceneError};
+use super::load::{check_placement, validate_emitter, validate_material, validate_trs, SceneError};
 use super::model::{CameraDesc, EmitterDesc, Material, Trs};
 use super::{light, Scene, SurfaceId};
 use glam::{Affine3A, Vec3};
@@ -202,6 +202,7 @@ fn validate_coalesced(scene: &Scene, edits: &[(usize, Edit)]) -> Result<(), Scen
                     ));
                 }
                 validate_trs("transform", transform).map_err(|e| reindex(i, e))?;
+                check_placement("transform", &scene.objects[idx].local_bounds, transform).map_err(|e| reindex(i, e))?;
             }
             Edit::Light { name, transform, emitter } => {
                 let idx = scene.light_index(name).ok_or_else(|| err(i, ".name", format!("unknown light '{name}'")))?;
@@ -214,6 +215,9 @@ fn validate_coalesced(scene: &Scene, edits: &[(usize, Edit)]) -> Result<(), Scen
                         ));
                     }
                     validate_trs("transform", t).map_err(|e| reindex(i, e))?;
+                    if let Some(mesh) = &scene.lights[idx].mesh {
+                        check_placement("transform", &mesh.bounds(), t).map_err(|e| reindex(i, e))?;
+                    }
                 }
                 if let Some(em) = emitter {
                     validate_emitter("emitter", em).map_err(|e| reindex(i, e))?;

@@ -1,8 +1,10 @@
 //! Loading and validating scenes. Validation happens here, once: everything later trusts the
 //! model. Every error names the offending field (`objects[2].transform.rotation`) or file and
 //! line; nothing non-finite gets in.
+use super::edits::Aabb;
 use super::model::*;
 use super::shapes::Mesh;
+use glam::Vec3;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -12,6 +14,18 @@ pub const QUATERNION_TOLERANCE: f32 = 1e-3;
 pub const MAX_RESOLUTION: u32 = 16384;
 /// Largest accepted tessellation parameter.
 pub const MAX_SEGMENTS: u32 = 4096;
+/// The largest magnitude a world coordinate may have, in scene units: of an object's vertices
+/// where its transform puts them, of a light's shape or position, of the camera's position and
+/// target. Far beyond any scene (the hard cases move objects by 1e5), and small enough that the
+/// areas, extents and cell counts techniques work out from positions stay finite in f32.
+pub const MAX_COORDINATE: f32 = 1e8;
+/// The largest component of a light's radiance (W/(sr·m²)) or intensity (W/sr): far above any
+/// physical source in any unit of length (`tests/hard_cases.rs` shows images linear in it up to
+/// here), and small enough that a light's power, radiance times an area of up to
+/// (2·[`MAX_COORDINATE`])² times π, stays finite in f32 (about 1.3e37).
+pub const MAX_EMISSION: f32 = 1e20;
+/// The least and the largest magnitude of a scale factor.
+pub const SCALE_LIMITS: [f32; 2] = [1e-6, 1e6];
 
 #[derive(Debug, Error, Clone, PartialEq)]
 pub enum SceneError {
@@ -133,17 +147,22 @@ fn check_finite(field: &str, values: &[f32]) -> Result<(), SceneError> {
     }
 }
 
-fn check_rgb(field: &str, c: crate::core::Rgb, max: Option<f32>) -> Result<(), SceneError> {
+/// Refuses a colour with a negative or non-finite component, or one above `max` (`why` says
+/// what the bound is for).
+fn check_rgb(field: &str, c: crate::core::Rgb, max: f32, why: &str) -> Result<(), SceneError> {
     check_finite(field, &c.to_array())?;
     if c.min_component() < 0.0 {
         return Err(invalid(field, "components must not be negative"));
     }
-    if let Some(max) = max {
-        if c.max_component() > max {
-            return Err(invalid(field, format!("components must lie in [0, {max}] (energy conservation)")));
-        }
+    if c.max_component() > max {
+        return Err(invalid(field, format!("components must lie in [0, {max}] ({why})")));
     }
     Ok(())
+}
+
+/// Checks an emitter's radiance or intensity: at most [`MAX_EMISSION`].
+fn check_emission(field: &str, c: crate::core::Rgb) -> Result<(), SceneError> {
+    check_rgb(field, c, MAX_EMISSION, "the largest emission: a light's power must stay finite in f32")
 }
 
 pub fn validate_trs(field: &str, t: &Trs) -> Result<(), SceneError> {
@@ -157,8 +176,53 @@ pub fn validate_trs(field: &str, t: &Trs) -> Result<(), SceneError> {
             format!("quaternion [x, y, z, w] has length {len}, expected 1 (±{QUATERNION_TOLERANCE})"),
         ));
     }
-    if let Some(i) = t.scale.iter().position(|s| *s == 0.0) {
-        return Err(invalid(format!("{field}.scale[{i}]"), "scale must not be zero (a zero-length axis)"));
+    check_coordinates(&format!("{field}.translation"), &t.translation)?;
+    let [least, largest] = SCALE_LIMITS;
+    if let Some(i) = t.scale.iter().position(|s| !(least..=largest).contains(&s.abs())) {
+        return Err(invalid(
+            format!("{field}.scale[{i}]"),
+            format!(
+                "{:e}: a scale's magnitude must lie in [{least:e}, {largest:e}] (zero flattens an axis)",
+                t.scale[i]
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// Refuses a coordinate beyond ±[`MAX_COORDINATE`].
+fn check_coordinates(field: &str, values: &[f32]) -> Result<(), SceneError> {
+    match values.iter().position(|v| v.abs() > MAX_COORDINATE) {
+        Some(i) => Err(invalid(
+            format!("{field}[{i}]"),
+            format!("{:e} is beyond ±{MAX_COORDINATE:e}, the largest world coordinate", values[i]),
+        )),
+        None => Ok(()),
+    }
+}
+
+/// Refuses a transform (`field`) that puts a shape with object-space bounds `local` beyond
+/// ±[`MAX_COORDINATE`] on some axis: the bounds' corners are where its vertices reach furthest.
+pub fn check_placement(field: &str, local: &Aabb, trs: &Trs) -> Result<(), SceneError> {
+    let xf = trs.world_from_object();
+    let reach = (0..8)
+        .map(|c: u32| {
+            let pick = |bit: u32, lo: f32, hi: f32| if c & bit == 0 { lo } else { hi };
+            let (lo, hi) = (local.min, local.max);
+            let corner = Vec3::new(pick(1, lo.x, hi.x), pick(2, lo.y, hi.y), pick(4, lo.z, hi.z));
+            let p = xf.transform_point3(corner);
+            if p.is_finite() {
+                p.abs().max_element()
+            } else {
+                f32::INFINITY
+            }
+        })
+        .fold(0.0, f32::max);
+    if reach > MAX_COORDINATE {
+        return Err(invalid(
+            field,
+            format!("puts the shape {reach:e} from the origin on an axis, beyond ±{MAX_COORDINATE:e}, the largest world coordinate"),
+        ));
     }
     Ok(())
 }
@@ -168,6 +232,8 @@ pub fn validate_camera(c: &CameraDesc) -> Result<(), SceneError> {
     check_finite("camera.look_at", &c.look_at)?;
     check_finite("camera.up", &c.up)?;
     check_finite("camera.vfov_deg", &[c.vfov_deg])?;
+    check_coordinates("camera.position", &c.position)?;
+    check_coordinates("camera.look_at", &c.look_at)?;
     let forward = glam::Vec3::from(c.look_at) - glam::Vec3::from(c.position);
     if forward.length_squared() == 0.0 {
         return Err(invalid("camera.look_at", "equals camera.position: the view direction has zero length"));
@@ -193,7 +259,7 @@ pub fn validate_camera(c: &CameraDesc) -> Result<(), SceneError> {
 pub fn validate_material(field: &str, m: &Material) -> Result<(), SceneError> {
     match m {
         Material::Diffuse { reflectance } | Material::Mirror { reflectance } => {
-            check_rgb(&format!("{field}.reflectance"), *reflectance, Some(1.0))
+            check_rgb(&format!("{field}.reflectance"), *reflectance, 1.0, "energy conservation")
         }
         Material::Glass { ior } => {
             check_finite(&format!("{field}.ior"), &[*ior])?;
@@ -207,9 +273,9 @@ pub fn validate_material(field: &str, m: &Material) -> Result<(), SceneError> {
 
 pub fn validate_emitter(field: &str, e: &EmitterDesc) -> Result<(), SceneError> {
     match e {
-        EmitterDesc::Point { intensity } => check_rgb(&format!("{field}.intensity"), *intensity, None),
+        EmitterDesc::Point { intensity } => check_emission(&format!("{field}.intensity"), *intensity),
         EmitterDesc::Spot { intensity, cone_deg, falloff_start_deg } => {
-            check_rgb(&format!("{field}.intensity"), *intensity, None)?;
+            check_emission(&format!("{field}.intensity"), *intensity)?;
             check_finite(&format!("{field}.cone_deg"), &[*cone_deg])?;
             if !(*cone_deg > 0.0 && *cone_deg < 180.0) {
                 return Err(invalid(format!("{field}.cone_deg"), "half-angle must lie in (0, 180)"));
@@ -222,13 +288,13 @@ pub fn validate_emitter(field: &str, e: &EmitterDesc) -> Result<(), SceneError> 
             }
             Ok(())
         }
-        EmitterDesc::Rect { radiance } => check_rgb(&format!("{field}.radiance"), *radiance, None),
+        EmitterDesc::Rect { radiance } => check_emission(&format!("{field}.radiance"), *radiance),
         EmitterDesc::Disc { radiance, segments } => {
-            check_rgb(&format!("{field}.radiance"), *radiance, None)?;
+            check_emission(&format!("{field}.radiance"), *radiance)?;
             check_segments(&format!("{field}.segments"), *segments)
         }
         EmitterDesc::Mesh { radiance, positions, indices } => {
-            check_rgb(&format!("{field}.radiance"), *radiance, None)?;
+            check_emission(&format!("{field}.radiance"), *radiance)?;
             let mut mesh = inline_mesh(field, positions, indices)?;
             mesh.drop_degenerate();
             if mesh.triangles.is_empty() {
@@ -374,6 +440,7 @@ pub fn validate_and_build_meshes(
         if mesh.triangles.is_empty() {
             return Err(invalid(shape_field, "mesh is empty (no non-degenerate triangles)"));
         }
+        check_placement(&format!("{field}.transform"), &mesh.bounds(), &o.transform)?;
         meshes.push(mesh);
     }
     let mut light_names = std::collections::HashSet::new();
@@ -382,6 +449,9 @@ pub fn validate_and_build_meshes(
         check_name(&field, "light", &l.name, &mut light_names)?;
         validate_emitter(&format!("{field}.emitter"), &l.emitter)?;
         validate_trs(&format!("{field}.transform"), &l.transform)?;
+        if let Some(mesh) = super::light::emitter_mesh(&l.emitter) {
+            check_placement(&format!("{field}.transform"), &mesh.bounds(), &l.transform)?;
+        }
     }
     Ok((meshes, dropped))
 }

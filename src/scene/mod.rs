@@ -56,6 +56,8 @@ pub struct SceneObject {
     pub hit_triangles: Vec<HitTriangle>,
     /// World-space surface area (m²).
     pub area: f32,
+    /// The bounds of `mesh` in object space: where a new transform would put it.
+    pub local_bounds: edits::Aabb,
 }
 
 /// A light in world space; `mesh` is its object-space shape, if it has one.
@@ -187,6 +189,7 @@ impl Scene {
                 let material = material_names.iter().position(|n| *n == o.material).unwrap_or(0) as u32;
                 SceneObject {
                     name: o.name.clone(),
+                    local_bounds: mesh.bounds(),
                     mesh: Arc::new(mesh),
                     material,
                     world_from_object: xf,

@@ -3,6 +3,7 @@
 //!
 //! Invariant: triangles are wound so that `(p1-p0)×(p2-p0)` points outward (for closed shapes) or
 //! towards +Z (for flat ones); glass and one-sided lights rely on it.
+use super::edits::Aabb;
 use glam::Vec3;
 use std::f32::consts::PI;
 use std::path::Path;
@@ -15,6 +16,11 @@ pub struct Mesh {
 }
 
 impl Mesh {
+    /// The bounds of its vertices.
+    pub fn bounds(&self) -> Aabb {
+        Aabb::of_points(self.positions.iter().copied())
+    }
+
     pub fn triangle(&self, i: usize) -> [Vec3; 3] {
         let [a, b, c] = self.triangles[i];
         [self.positions[a as usize], self.positions[b as usize], self.positions[c as usize]]
