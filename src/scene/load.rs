@@ -155,6 +155,7 @@ fn check_rgb(field: &str, c: crate::core::Rgb, max: f32, why: &str) -> Result<()
         return Err(invalid(field, "components must not be negative"));
     }
     if c.max_component() > max {
+        let max = if max < 1e6 { max.to_string() } else { format!("{max:e}") };
         return Err(invalid(field, format!("components must lie in [0, {max}] ({why})")));
     }
     Ok(())
