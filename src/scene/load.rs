@@ -1,6 +1,8 @@
 //! Loading and validating scenes. Validation happens here, once: everything later trusts the
 //! model. Every error names the offending field (`objects[2].transform.rotation`) or file and
-//! line; nothing non-finite gets in.
+//! line; nothing non-finite gets in, and nothing that f32 arithmetic on it would overflow: world
+//! coordinates, scale factors and emission have bounds ([`MAX_COORDINATE`], [`SCALE_LIMITS`],
+//! [`MAX_EMISSION`]), checked for scenes and edits alike.
 use super::edits::Aabb;
 use super::model::*;
 use super::shapes::Mesh;
@@ -222,7 +224,9 @@ pub fn check_placement(field: &str, local: &Aabb, trs: &Trs) -> Result<(), Scene
     if reach > MAX_COORDINATE {
         return Err(invalid(
             field,
-            format!("puts the shape {reach:e} from the origin on an axis, beyond ±{MAX_COORDINATE:e}, the largest world coordinate"),
+            format!(
+                "puts the shape {reach:e} from the origin, beyond ±{MAX_COORDINATE:e}, the largest world coordinate"
+            ),
         ));
     }
     Ok(())
