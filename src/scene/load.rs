@@ -384,14 +384,15 @@ fn check_name<'a>(
 /// Degenerate triangles dropped at load: (object name, count).
 pub type DroppedTriangles = Vec<(String, usize)>;
 
-/// Validates the description against `budget` and builds each object's mesh; `meshes[i]`
-/// belongs to `desc.objects[i]`. Degenerate triangles are dropped and counted.
+/// Validates the description against `budget` and builds each object's mesh with its
+/// object-space bounds; `meshes[i]` belongs to `desc.objects[i]`. Degenerate triangles are
+/// dropped and counted.
 pub fn validate_and_build_meshes(
     desc: &SceneDesc,
     scene_dir: &Path,
     root: &Path,
     budget: &SceneBudget,
-) -> Result<(Vec<Mesh>, DroppedTriangles), SceneError> {
+) -> Result<(Vec<(Mesh, Aabb)>, DroppedTriangles), SceneError> {
     validate_camera(&desc.camera)?;
     check_budget(desc, scene_dir, root, budget)?;
     for (name, m) in &desc.materials {
@@ -445,8 +446,9 @@ pub fn validate_and_build_meshes(
         if mesh.triangles.is_empty() {
             return Err(invalid(shape_field, "mesh is empty (no non-degenerate triangles)"));
         }
-        check_placement(&format!("{field}.transform"), &mesh.bounds(), &o.transform)?;
-        meshes.push(mesh);
+        let bounds = mesh.bounds();
+        check_placement(&format!("{field}.transform"), &bounds, &o.transform)?;
+        meshes.push((mesh, bounds));
     }
     let mut light_names = std::collections::HashSet::new();
     for (i, l) in desc.lights.iter().enumerate() {

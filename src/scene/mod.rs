@@ -181,7 +181,7 @@ impl Scene {
             .objects
             .iter()
             .zip(meshes)
-            .map(|(o, mesh)| {
+            .map(|(o, (mesh, local_bounds))| {
                 let xf = o.transform.world_from_object();
                 let world = world_positions(&mesh, &xf);
                 let area = mesh_area(&world, &mesh);
@@ -189,7 +189,7 @@ impl Scene {
                 let material = material_names.iter().position(|n| *n == o.material).unwrap_or(0) as u32;
                 SceneObject {
                     name: o.name.clone(),
-                    local_bounds: mesh.bounds(),
+                    local_bounds,
                     mesh: Arc::new(mesh),
                     material,
                     world_from_object: xf,
