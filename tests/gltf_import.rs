@@ -173,6 +173,31 @@ fn bad_files_are_refused_naming_the_part() {
             Box::new(|d: &mut Value| d["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(99)),
             "gltf",
         ),
+        // A node beyond the bounds scene validation puts on transforms is refused by name, not
+        // as the object it becomes (an empty mesh, its triangles overflowed or collapsed) or the
+        // camera framed around it (NaN). A 1e30 matrix decomposes; it is not taken for shear.
+        (
+            "huge scale",
+            Box::new(|d: &mut Value| d["nodes"][0]["scale"] = json!([1e30, 1e30, 1e30])),
+            "nodes[0] ('n0'): its world transform scales by 1e30",
+        ),
+        (
+            "tiny scale",
+            Box::new(|d: &mut Value| d["nodes"][0]["scale"] = json!([1.0, 1e-30, 1.0])),
+            "nodes[0] ('n0'): its world transform scales by 1e-30",
+        ),
+        (
+            "huge matrix",
+            Box::new(
+                |d: &mut Value| d["nodes"][0] = json!({"name": "n0", "mesh": 0, "matrix": [1e30, 0.0, 0.0, 0.0, 0.0, 1e30, 0.0, 0.0, 0.0, 0.0, 1e30, 0.0, 0.0, 0.0, 0.0, 1.0]}),
+            ),
+            "nodes[0] ('n0'): its world transform scales by 1e30",
+        ),
+        (
+            "far",
+            Box::new(|d: &mut Value| d["nodes"][0]["translation"] = json!([0.0, -3e38, 0.0])),
+            "nodes[0] ('n0'): its world translation reaches 3e38",
+        ),
         (
             "no scene",
             Box::new(|d: &mut Value| {
@@ -194,6 +219,28 @@ fn bad_files_are_refused_naming_the_part() {
     let bytes = doc.finish(json!({"scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], "meshes": [{"primitives": [{"attributes": {"POSITION": p}}]}]}));
     let err = import(&bytes).expect_err("NaN refused");
     assert!(err.to_string().contains("positions[1][0]"), "{err}");
+    // A vertex stored beyond the largest world coordinate, under an identity node.
+    let mut doc = Doc::default();
+    let p = doc.floats(&[0.0, 0.0, 0.0, 1e30, 0.0, 0.0, 0.0, 1.0, 0.0], "VEC3");
+    let bytes = doc.finish(json!({"scene": 0, "scenes": [{"nodes": [0]}], "nodes": [{"mesh": 0}], "meshes": [{"primitives": [{"attributes": {"POSITION": p}}]}]}));
+    let err = import(&bytes).expect_err("a vertex at 1e30 refused");
+    assert!(err.to_string().contains("nodes[0]: puts its mesh 1e30 from the origin"), "{err}");
+}
+
+#[test]
+fn the_largest_accepted_node_transforms_import_and_build() {
+    // Scale 1e6 and 1e-6 (the limits), the unit triangle's far corner at 9.9e7 < 1e8.
+    for (scale, x) in [(1e6f32, 9.8e7f32), (1e-6, -9.9e7)] {
+        let mut doc = Doc::default();
+        let mesh = doc.triangle(None);
+        let bytes = doc.finish(json!({
+            "scene": 0, "scenes": [{"nodes": [0]}], "meshes": [mesh],
+            "nodes": [{"name": "far", "mesh": 0, "scale": [scale, scale, scale], "translation": [x, 0.0, 0.0]}],
+        }));
+        let imported = import(&bytes).unwrap_or_else(|e| panic!("scale {scale} at {x}: {e}"));
+        let got = world_vertices(&imported, "far");
+        assert!(close(got[1], Vec3::new(x + scale, 0.0, 0.0), 1.0), "scale {scale} at {x}: {got:?}");
+    }
 }
 
 #[test]

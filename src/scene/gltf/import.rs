@@ -6,11 +6,11 @@
 //! candela (lm/sr); relume's intensity is radiometric, W/sr = cd / 683 (the luminous efficacy
 //! that defines the candela). Emission maps one to one (see `materials.rs`).
 use super::materials;
-use super::nodes::{decompose, node_label, relume_extras, NodeInfo};
+use super::nodes::{check_world, decompose, node_label, relume_extras, NodeInfo};
 use super::warnings::Warnings;
 use super::Target;
 use crate::core::Rgb;
-use crate::scene::load::{invalid, SceneBudget, SceneError};
+use crate::scene::load::{invalid, SceneBudget, SceneError, MAX_COORDINATE};
 use crate::scene::model::*;
 use glam::{Mat4, Quat, Vec3};
 use std::collections::{BTreeMap, HashMap, HashSet};
@@ -81,6 +81,9 @@ impl<'a> Importer<'a> {
         if node.skin().is_some() {
             self.warnings.add("skins are not read; the mesh renders in its bind pose", &label);
         }
+        if node.mesh().is_some() || node.light().is_some() {
+            check_world(&label, &info.world)?;
+        }
         if let Some(mesh) = node.mesh() {
             let primitives = mesh.primitives().len();
             for prim in mesh.primitives() {
@@ -107,7 +110,7 @@ impl<'a> Importer<'a> {
         let mirrored = world.determinant() < 0.0;
         let (positions, indices) = self.primitive(mesh, prim, mirrored)?;
         self.count(indices.len() as u64)?;
-        self.grow_bounds(&world, &positions);
+        self.grow_bounds(label, &world, &positions)?;
         let (transform, positions) = match decompose(&world) {
             Some(trs) => (trs, positions),
             None if info.dynamic => return Err(invalid(
@@ -220,14 +223,24 @@ impl<'a> Importer<'a> {
         Ok(())
     }
 
-    fn grow_bounds(&mut self, world: &Mat4, positions: &[[f32; 3]]) {
+    /// Grows the scene's bounds by the node's world-space vertices, refusing the node when a
+    /// vertex lands beyond ±[`MAX_COORDINATE`] (scene validation's bound, named here by node).
+    fn grow_bounds(&mut self, label: &str, world: &Mat4, positions: &[[f32; 3]]) -> Result<(), SceneError> {
         for p in positions {
             let w = world.transform_point3((*p).into());
+            let reach = w.abs().max_element();
+            if reach.is_nan() || reach > MAX_COORDINATE {
+                return Err(invalid(
+                    label,
+                    format!("puts its mesh {reach:e} from the origin, beyond ±{MAX_COORDINATE:e}, the largest world coordinate"),
+                ));
+            }
             self.bounds = Some(match self.bounds {
                 Some((lo, hi)) => (lo.min(w), hi.max(w)),
                 None => (w, w),
             });
         }
+        Ok(())
     }
 
     /// The relume name of a glTF material, converting it on first use.

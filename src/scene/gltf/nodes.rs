@@ -4,9 +4,9 @@
 //! A node is dynamic when an animation channel targets it or any ancestor, or when its own or
 //! an ancestor's `extras` say `{"relume": {"dynamic": true}}`. World matrices are
 //! `root · … · parent · local`, where `root` is the scene-level uniform scale.
-use super::super::load::{invalid, SceneError};
+use super::super::load::{invalid, SceneError, MAX_COORDINATE, SCALE_LIMITS};
 use super::super::model::Trs;
-use glam::{Mat4, Quat, Vec3};
+use glam::{DMat4, Mat4, Quat, Vec3};
 use std::collections::HashSet;
 
 /// Relative tolerance for a matrix to count as T·R·S: recomposing the decomposition must
@@ -59,20 +59,56 @@ pub fn local_matrix(node: &gltf::Node) -> Result<Mat4, SceneError> {
     }
 }
 
-/// The matrix as TRS, or `None` when it has shear, a zero axis or non-finite entries.
+/// The matrix as TRS, or `None` when it has shear, a zero axis or non-finite entries. The
+/// decomposition runs in f64, where an axis's squared length cannot overflow, so a huge but
+/// finite scale decomposes (and is then refused by its size, not mistaken for shear).
 pub fn decompose(m: &Mat4) -> Option<Trs> {
-    let (s, r, t) = m.to_scale_rotation_translation();
+    let d = m.as_dmat4();
+    let (s, r, t) = d.to_scale_rotation_translation();
     if !(s.is_finite() && r.is_finite() && t.is_finite()) || s.min_element().abs() == 0.0 {
         return None;
     }
-    let back = Mat4::from_scale_rotation_translation(s, r.normalize(), t);
-    let size = m.x_axis.length().max(m.y_axis.length()).max(m.z_axis.length()).max(1e-30);
-    let worst = (0..3).map(|c| (back.col(c) - m.col(c)).length()).fold(0.0f32, f32::max);
-    (worst <= SHEAR_TOLERANCE * size).then(|| Trs {
-        translation: t.to_array(),
-        rotation: r.normalize().to_array(),
-        scale: s.to_array(),
-    })
+    let back = DMat4::from_scale_rotation_translation(s, r.normalize(), t);
+    let size = d.x_axis.length().max(d.y_axis.length()).max(d.z_axis.length()).max(1e-300);
+    let worst = (0..3).map(|c| (back.col(c) - d.col(c)).length()).fold(0.0f64, f64::max);
+    let trs = Trs {
+        translation: t.as_vec3().to_array(),
+        rotation: r.as_quat().normalize().to_array(),
+        scale: s.as_vec3().to_array(),
+    };
+    (worst <= f64::from(SHEAR_TOLERANCE) * size && trs.scale.iter().all(|v| v.is_finite() && *v != 0.0)).then_some(trs)
+}
+
+/// Refuses a node holding a mesh or a light whose world transform scales by a factor outside
+/// [`SCALE_LIMITS`] or translates beyond ±[`MAX_COORDINATE`], the bounds scene validation puts
+/// on every transform, so that the error names the node and not the object, light or framing
+/// camera it would become.
+pub fn check_world(label: &str, world: &Mat4) -> Result<(), SceneError> {
+    if !world.is_finite() {
+        return Err(invalid(label, "its world transform overflows f32 (the product of its ancestors' transforms)"));
+    }
+    // In f64, where an axis's squared length cannot overflow; reported in f32, as stored.
+    let d = world.as_dmat4();
+    let [least, largest] = SCALE_LIMITS;
+    let scales = [d.x_axis, d.y_axis, d.z_axis].map(|axis| axis.truncate().length() as f32);
+    if let Some(s) = scales.iter().find(|s| !(least..=largest).contains(*s)) {
+        return Err(invalid(
+            label,
+            format!(
+                "its world transform scales by {s:e}, outside [{least:e}, {largest:e}], the scale factors relume takes"
+            ),
+        ));
+    }
+    let reach = world.w_axis.truncate().abs().max_element();
+    if reach > MAX_COORDINATE {
+        return Err(invalid(
+            label,
+            format!(
+                "its world translation reaches {reach:e}, beyond ±{MAX_COORDINATE:e}, the largest world coordinate"
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Whether the node's `extras` hold `{"relume": {"dynamic": true}}`.
