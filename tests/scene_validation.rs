@@ -200,3 +200,31 @@ fn world_coordinates_scales_and_emission_are_bounded() {
     });
     assert!(r.is_ok(), "{:?}", r.err());
 }
+
+#[test]
+fn animation_keyframes_keep_shapes_within_the_world_coordinates() {
+    // An edit that moves a shape beyond the largest world coordinate is refused; so is an
+    // animation whose keyframe would make that edit, when it is loaded, not when it plays.
+    let scene = load_with("anim-reach", |v| {
+        v["objects"][0]["dynamic"] = serde_json::json!(true);
+        v["objects"][0]["transform"] = serde_json::json!({"scale": [10, 10, 10]});
+    })
+    .expect("scene");
+    let track = |x: f64| {
+        let keys = serde_json::json!([
+            {"time": 0, "transform": {"translation": [0, 0, 0], "scale": [1e6, 1e6, 1e6]}},
+            {"time": 1, "transform": {"translation": [x, 0, 0], "scale": [1e6, 1e6, 1e6]}},
+        ]);
+        let anim = serde_json::json!({"duration": 1, "tracks": [{"target": "object", "name": "o", "keyframes": keys}]});
+        serde_json::from_value::<relume::scene::animation::Animation>(anim).expect("animation json")
+    };
+    // The unit triangle scaled 1e6 reaches 1e6 past its translation.
+    match track(9.95e7).validate(&scene) {
+        Err(SceneError::Invalid { field, message }) => {
+            assert_eq!(field, "tracks[0].keyframes[1].transform", "{message}");
+            assert!(message.contains("largest world coordinate"), "{message}");
+        }
+        other => panic!("a keyframe beyond the world's coordinates was not refused: {other:?}"),
+    }
+    track(9.8e7).validate(&scene).expect("a keyframe within the world's coordinates");
+}

@@ -6,8 +6,8 @@
 //! time yields the same [`Edit`]s a client would send, so animations drive sessions through the
 //! ordinary edit path. Times are seconds; with `loop`, time wraps at `duration`, otherwise it
 //! holds the last keyframe.
-use super::edits::Edit;
-use super::load::{invalid, parse_json, validate_trs, SceneError};
+use super::edits::{Aabb, Edit};
+use super::load::{check_placement, invalid, parse_json, validate_trs, SceneError};
 use super::model::Trs;
 use super::Scene;
 use glam::{Quat, Vec3};
@@ -102,27 +102,33 @@ pub fn interpolate_trs(a: &Trs, b: &Trs, s: f32) -> Trs {
     }
 }
 
-/// Checks an object or light track (its target exists and is dynamic, its transforms are valid)
-/// and returns its keyframe times. `dynamic` is `None` when no target has that name.
+/// Checks an object or light track (its target exists and is dynamic, its transforms are valid
+/// and keep its shape within the world's coordinates, as an edit must) and returns its keyframe
+/// times. `target` is whether the target is dynamic and its shape's object-space bounds (`None`
+/// for a punctual light), or `None` when no target has that name.
 fn transform_track_times(
     field: &str,
     kind: &str,
     name: &str,
-    dynamic: Option<bool>,
+    target: Option<(bool, Option<Aabb>)>,
     keys: &[TransformKey],
 ) -> Result<Vec<f32>, SceneError> {
-    match dynamic {
+    let bounds = match target {
         None => return Err(invalid(format!("{field}.name"), format!("unknown {kind} '{name}'"))),
-        Some(false) => {
+        Some((false, _)) => {
             return Err(invalid(
                 format!("{field}.name"),
                 format!("{kind} '{name}' is static; animate only dynamic {kind}s"),
             ))
         }
-        Some(true) => {}
-    }
+        Some((true, bounds)) => bounds,
+    };
     for (k, key) in keys.iter().enumerate() {
-        validate_trs(&format!("{field}.keyframes[{k}].transform"), &key.transform)?;
+        let field = format!("{field}.keyframes[{k}].transform");
+        validate_trs(&field, &key.transform)?;
+        if let Some(b) = &bounds {
+            check_placement(&field, b, &key.transform)?;
+        }
     }
     Ok(keys.iter().map(|k| k.time).collect())
 }
@@ -143,12 +149,17 @@ impl Animation {
             let field = format!("tracks[{i}]");
             let times: Vec<f32> = match track {
                 Track::Object { name, keyframes } => {
-                    let dynamic = scene.object_index(name).map(|i| scene.objects[i].dynamic);
-                    transform_track_times(&field, "object", name, dynamic, keyframes)?
+                    let target = scene
+                        .object_index(name)
+                        .map(|i| (scene.objects[i].dynamic, Some(scene.objects[i].local_bounds)));
+                    transform_track_times(&field, "object", name, target, keyframes)?
                 }
                 Track::Light { name, keyframes } => {
-                    let dynamic = scene.light_index(name).map(|i| scene.lights[i].dynamic);
-                    transform_track_times(&field, "light", name, dynamic, keyframes)?
+                    let target = scene.light_index(name).map(|i| {
+                        let light = &scene.lights[i];
+                        (light.dynamic, light.mesh.as_ref().map(|m| m.bounds()))
+                    });
+                    transform_track_times(&field, "light", name, target, keyframes)?
                 }
                 Track::Camera { keyframes } => {
                     for (k, key) in keyframes.iter().enumerate() {
