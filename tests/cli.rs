@@ -154,6 +154,13 @@ fn bad_input_exits_2_with_a_message() {
             "--denoise: unknown quality 'ultra'",
         ),
     ];
+    // An exposure of NaN (or beyond the service's ±32 stops) would write a black PNG.
+    let exposure = |ev: &str| {
+        let png = dir.join("x.png").display().to_string();
+        let args = ["render", &scene("cornell-box.json").display().to_string(), "--exposure", ev, "--out", &png];
+        (args.map(String::from).to_vec(), "--exposure: ")
+    };
+    let cases = cases.into_iter().chain([exposure("NaN"), exposure("inf"), exposure("-33")]);
     for (args, words) in cases {
         let out = relume().args(&args).output().unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr);

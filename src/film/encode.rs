@@ -44,6 +44,20 @@ impl ImageFormat {
     }
 }
 
+/// The exposure the service and `relume render` take, in stops either way: a factor of 2^±32
+/// brings any radiance an image holds in f32 into an 8-bit frame's range.
+pub const MAX_EXPOSURE_STOPS: f32 = 32.0;
+
+/// Checks an exposure for the 8-bit formats: a finite number of stops within
+/// ±[`MAX_EXPOSURE_STOPS`] (NaN would make every pixel NaN, then 0).
+pub fn check_exposure(exposure_ev: f32) -> Result<(), String> {
+    if exposure_ev.is_finite() && exposure_ev.abs() <= MAX_EXPOSURE_STOPS {
+        Ok(())
+    } else {
+        Err(format!("{exposure_ev} is not a finite number of stops in [-{MAX_EXPOSURE_STOPS}, {MAX_EXPOSURE_STOPS}]"))
+    }
+}
+
 /// Encodes an image into bytes. `exposure_ev` applies to the 8-bit formats only.
 pub fn encode(img: &LinearImage, format: ImageFormat, exposure_ev: f32) -> Result<Vec<u8>, EncodeError> {
     let err = |message: String| EncodeError::Encode { format, message };

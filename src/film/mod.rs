@@ -14,6 +14,6 @@ mod image;
 pub use accum::{Film, FilmVersion, PixelAccum};
 pub use aux::{AuxFilm, AuxImages, AuxSample};
 pub use denoise::{DenoiseError, DenoiseQuality, DenoiseSettings, Denoiser};
-pub use encode::{encode, write_image, EncodeError, ImageFormat};
+pub use encode::{check_exposure, encode, write_image, EncodeError, ImageFormat};
 pub use filter::bilateral_filter;
 pub use image::LinearImage;

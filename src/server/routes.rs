@@ -7,7 +7,7 @@ use super::protocol::{
 };
 use super::state::{view, AppState, SessionEntry};
 use super::worker::PublishedFrame;
-use crate::film::ImageFormat;
+use crate::film::{check_exposure, ImageFormat};
 use axum::body::{Body, Bytes};
 use axum::extract::{FromRequest, Path, Query, Request, State};
 use axum::http::{header, HeaderMap, HeaderValue, StatusCode};
@@ -284,9 +284,7 @@ pub async fn get_frame(
     let Query(q) = query.map_err(|e| ApiError::invalid(format!("query: {}", e.body_text())))?;
     let format = frame_format(&file)?;
     let exposure = q.exposure.unwrap_or(0.0);
-    if !exposure.is_finite() || exposure.abs() > 32.0 {
-        return Err(ApiError::invalid("exposure: must be a finite number of stops in [-32, 32]"));
-    }
+    check_exposure(exposure).map_err(|m| ApiError::invalid(format!("exposure: {m}")))?;
     let entry = s.session(&id)?;
     let frame = wait_for_frame(&s, &entry, q.tick).await?;
     let key = EncodingKey::new(&frame, format, q.denoised == Some(false), exposure);

@@ -3,7 +3,7 @@
 use super::{denoise_settings, SceneArgs, UsageError};
 use crate::embree::Device;
 use crate::engine::{thread_pool, Frame, Session};
-use crate::film::{write_image, ImageFormat};
+use crate::film::{check_exposure, write_image, ImageFormat};
 use crate::scene::Scene;
 use crate::technique::TechniqueConfig;
 use anyhow::{Context, Result};
@@ -25,8 +25,8 @@ pub struct RenderArgs {
     pub out: PathBuf,
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Exposure in stops for PNG/JPEG output.
-    #[arg(long, default_value_t = 0.0)]
+    /// Exposure in stops for PNG/JPEG output (negative darkens: `--exposure -1`).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
     pub exposure: f32,
     /// Animation to render: NAME.anim.json, or for a glTF scene an animation's name in the
     /// file; --out is then a folder.
@@ -57,6 +57,7 @@ pub fn run(args: RenderArgs) -> Result<()> {
     if args.spp == 0 {
         return Err(UsageError("--spp must be at least 1".into()).into());
     }
+    check_exposure(args.exposure).map_err(|m| UsageError(format!("--exposure: {m}")))?;
     match &args.anim {
         Some(anim) => render_animation(&args, anim),
         None => render_still(&args),
