@@ -7,10 +7,8 @@ use relume::tools::load::{run_load, LoadArgs};
 use std::path::Path;
 use std::time::Duration;
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn two_sessions_for_five_seconds_lose_nothing() {
-    let s = TestServer::start(None, Limits::default()).await;
-    let args = LoadArgs {
+fn merry_go_round(s: &TestServer) -> LoadArgs {
+    LoadArgs {
         url: s.url(""),
         scene: "merry-go-round".into(),
         anim: Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/merry-go-round.anim.json"),
@@ -26,8 +24,13 @@ async fn two_sessions_for_five_seconds_lose_nothing() {
         frames: "png".into(),
         token: None,
         json: None,
-    };
-    let r = run_load(&args).await.expect("load run");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_sessions_for_five_seconds_lose_nothing() {
+    let s = TestServer::start(None, Limits::default()).await;
+    let r = run_load(&merry_go_round(&s)).await.expect("load run");
     eprintln!("{r:?}");
     assert_eq!(r.errors, 0, "{:?}", r.error_samples);
     assert_eq!(r.lost_edits, 0);
@@ -36,5 +39,21 @@ async fn two_sessions_for_five_seconds_lose_nothing() {
     assert!(r.latency_p50_ms > 0.0 && r.latency_p50_ms <= r.latency_p99_ms);
     // The sessions were cleaned up afterwards.
     assert_eq!(s.state.session_count(), 0);
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_warm_up_past_the_run_is_sampled_within_it_and_a_zero_timeout_is_refused() {
+    let s = TestServer::start(None, Limits::default()).await;
+    // The warm sample once waited out --warmup after the streams ended: an hour here. (The
+    // minute below is a bound on a hang, not a speed goal: the run streams for one second.)
+    let args = LoadArgs { duration: Duration::from_secs(1), warmup: Duration::from_secs(3600), ..merry_go_round(&s) };
+    let r = tokio::time::timeout(Duration::from_secs(60), run_load(&args)).await.expect("the run waited for --warmup");
+    let r = r.expect("load run");
+    assert_eq!(r.errors, 0, "{:?}", r.error_samples);
+    assert!(r.server_rss_warm_bytes > 0, "no warm sample");
+    let args = LoadArgs { timeout: Duration::ZERO, ..merry_go_round(&s) };
+    let err = run_load(&args).await.expect_err("a zero --timeout");
+    assert!(err.to_string().contains("--timeout"), "{err}");
     s.shutdown().await.unwrap();
 }

@@ -74,7 +74,8 @@ pub struct LoadArgs {
     #[arg(long, env = "RELUME_TOKEN", hide_env_values = true)]
     pub token: Option<String>,
     /// The server's RSS is sampled this long into the run too, and its growth reported from
-    /// there to the end (a soak's measure of leaks, after caches and pools have filled).
+    /// there to the end (a soak's measure of leaks, after caches and pools have filled); at most
+    /// half of `--duration`.
     #[arg(long, default_value = "10s", value_parser = humantime::parse_duration)]
     pub warmup: Duration,
     /// Also write the report as JSON.
@@ -189,6 +190,14 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
     if args.sessions == 0 || !(args.hz > 0.0 && args.hz <= 1000.0) {
         return Err(UsageError("--sessions must be at least 1 and --hz in (0, 1000]".into()).into());
     }
+    if args.timeout.is_zero() {
+        return Err(UsageError("--timeout must be longer than zero".into()).into());
+    }
+    // The warm sample is taken during the run: at most halfway through it.
+    let warmup = args.warmup.min(args.duration / 2);
+    if warmup < args.warmup {
+        eprintln!("relume load: --warmup {:?} is past half of --duration; sampling at {warmup:?}", args.warmup);
+    }
     let anim = Animation::load(&args.anim).map_err(|e| UsageError(format!("{}: {e}", args.anim.display())))?;
     let config = technique(&args.technique)?;
     let frames: FrameFormat = serde_json::from_value(serde_json::Value::String(args.frames.clone()))
@@ -201,7 +210,7 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
     let ids = create_sessions(&http, &base, args, &config).await?;
     let started = Instant::now();
     let warm = {
-        let (http, base, warmup) = (http.clone(), base.clone(), args.warmup);
+        let (http, base) = (http.clone(), base.clone());
         tokio::spawn(async move {
             tokio::time::sleep(warmup).await;
             server_figures(&http, &base).await.resident_bytes
