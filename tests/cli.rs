@@ -154,13 +154,22 @@ fn bad_input_exits_2_with_a_message() {
             "--denoise: unknown quality 'ultra'",
         ),
     ];
-    // An exposure of NaN (or beyond the service's ±32 stops) would write a black PNG.
-    let exposure = |ev: &str| {
+    // A render of the Cornell box with one flag's value, and the words its refusal must hold.
+    let render_with = |flag: &str, value: &str, words: &'static str| {
         let png = dir.join("x.png").display().to_string();
-        let args = ["render", &scene("cornell-box.json").display().to_string(), "--exposure", ev, "--out", &png];
-        (args.map(String::from).to_vec(), "--exposure: ")
+        let args = ["render", &scene("cornell-box.json").display().to_string(), flag, value, "--out", &png];
+        (args.map(String::from).to_vec(), words)
     };
-    let cases = cases.into_iter().chain([exposure("NaN"), exposure("inf"), exposure("-33")]);
+    // An exposure of NaN (or beyond the service's ±32 stops) would write a black PNG; 100 000
+    // threads once took the server seconds to spawn, while it answered nothing.
+    let threads = "'--threads <THREADS>': must be a whole number from 1 to 1024";
+    let cases = cases.into_iter().chain([
+        render_with("--exposure", "NaN", "--exposure: "),
+        render_with("--exposure", "inf", "--exposure: "),
+        render_with("--exposure", "-33", "--exposure: "),
+        render_with("--threads", "0", threads),
+        render_with("--threads", "100000", threads),
+    ]);
     for (args, words) in cases {
         let out = relume().args(&args).output().unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr);

@@ -33,8 +33,8 @@ pub struct SceneArgs {
     /// Image height (default: the scene camera's).
     #[arg(long)]
     pub height: Option<u32>,
-    /// Rendering threads (default: all cores).
-    #[arg(long)]
+    /// Rendering threads, 1 to 1024 (default: all cores).
+    #[arg(long, value_parser = thread_count)]
     pub threads: Option<usize>,
     /// Cap Embree's kernels at this ISA: sse2, sse4.2, avx, avx2 or avx512 (default: the
     /// widest this CPU has).
@@ -149,6 +149,19 @@ pub fn write_json_report<T: serde::Serialize>(path: Option<&Path>, report: &T) -
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
+}
+
+/// The most rendering threads a command takes: far more than the cores of any machine it runs
+/// on, and few enough that their stacks cannot exhaust memory before the pool is up (100 000
+/// threads took the server seconds to spawn, and it answered nothing meanwhile).
+const MAX_THREADS: usize = 1024;
+
+/// Parses `--threads`: a whole number in 1..=[`MAX_THREADS`].
+fn thread_count(s: &str) -> Result<usize, String> {
+    match s.parse::<usize>() {
+        Ok(n) if (1..=MAX_THREADS).contains(&n) => Ok(n),
+        _ => Err(format!("must be a whole number from 1 to {MAX_THREADS}")),
+    }
 }
 
 /// The requested thread count, or one per core.

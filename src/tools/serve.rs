@@ -57,8 +57,8 @@ pub struct ServeArgs {
     /// hostname).
     #[arg(long)]
     pub node: Option<String>,
-    /// Rendering threads shared by all sessions (default: all cores).
-    #[arg(long)]
+    /// Rendering threads shared by all sessions, 1 to 1024 (default: all cores).
+    #[arg(long, value_parser = super::thread_count)]
     pub threads: Option<usize>,
     /// Cap Embree's kernels at this ISA: sse2, sse4.2, avx, avx2 or avx512 (default: the
     /// widest this CPU has).
