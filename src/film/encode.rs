@@ -44,8 +44,8 @@ impl ImageFormat {
     }
 }
 
-/// The exposure the service and `relume render` take, in stops either way: a factor of 2^±32
-/// brings any radiance an image holds in f32 into an 8-bit frame's range.
+/// The exposure the service and `relume render` take, in stops either way: a factor of up to
+/// 2^32 (about 4·10⁹) brighter or darker, beyond any useful view of an image.
 pub const MAX_EXPOSURE_STOPS: f32 = 32.0;
 
 /// Checks an exposure for the 8-bit formats: a finite number of stops within

@@ -152,8 +152,8 @@ pub fn write_json_report<T: serde::Serialize>(path: Option<&Path>, report: &T) -
 }
 
 /// The most rendering threads a command takes: far more than the cores of any machine it runs
-/// on, and few enough that their stacks cannot exhaust memory before the pool is up (100 000
-/// threads took the server seconds to spawn, and it answered nothing meanwhile).
+/// on, and few enough to spawn at once (100 000 took the server seconds, and it answered
+/// nothing meanwhile).
 const MAX_THREADS: usize = 1024;
 
 /// Parses `--threads`: a whole number in 1..=[`MAX_THREADS`].
