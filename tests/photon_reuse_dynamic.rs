@@ -4,7 +4,6 @@ mod common;
 use common::*;
 use relume::embree::Device;
 use relume::engine::{thread_pool, Session};
-use relume::scene::animation::Animation;
 use relume::scene::edits::Edit;
 use relume::scene::{Scene, Trs};
 use relume::technique::photon_reuse::{PhotonReuseConfig, ReuseMode};
@@ -129,32 +128,42 @@ fn distribution_maps_converge_to_their_targets_after_a_light_stops() {
     }
 }
 
-#[test]
-fn error_mode_never_traces_more_rays_than_naive() {
-    // Property: on the same animation with the same seed, error mode's verification rays plus
-    // its retraced segments never outnumber naive mode's retraced segments, tick by tick.
-    let device = Device::new(2).unwrap();
-    let pool = thread_pool(2).unwrap();
-    let anim = Animation::load(&scenes_dir().join("bunnies-1.anim.json")).unwrap();
-    let run = |reuse: ReuseMode| {
-        pool.install(|| {
-            let mut scene = load("bunnies-1.json");
-            scene.set_resolution(16, 16);
-            let mut s = session(scene, PhotonReuseConfig { paths: 100_000, reuse, ..Default::default() }, 5, &device);
-            (0..8)
-                .map(|i| {
-                    s.queue_edits(anim.edits_at(i as f32 / 10.0)).unwrap();
-                    photon_stats(&s.tick().unwrap()).photon_rays()
-                })
-                .collect::<Vec<u64>>()
+/// Full-scene rays per tick (verification, retraces, fills and primary checks) of `reuse`, while
+/// the Cornell box's cube slides along x by 2 mm a tick for 8 ticks. The crossing test's rays,
+/// against the moved cube alone, are left out: both modes make them.
+fn full_scene_rays_while_a_cube_slides(reuse: ReuseMode, device: &Device) -> Vec<u64> {
+    let pool = thread_pool(2).expect("pool");
+    let config = PhotonReuseConfig { paths: 100_000, reuse, refine: 0.0, ..PhotonReuseConfig::default() };
+    let mut s = session(cornell_with_a_cube(100.0), config, 5, device);
+    pool.install(|| s.tick()).expect("tick 0");
+    let cube = s.scene().desc().objects.iter().find(|o| o.name == "cube").expect("cube").transform;
+    (1..=8)
+        .map(|i| {
+            let [x, y, z] = cube.translation;
+            let moved = Trs { translation: [x + 2.0 * i as f32, y, z], ..cube };
+            s.queue_edits(vec![Edit::Object { name: "cube".into(), transform: moved }]).expect("edit");
+            let stats = photon_stats(&pool.install(|| s.tick()).expect("tick"));
+            stats.photon_rays() - stats.crossing_rays
         })
-    };
-    let (naive, error) = (run(ReuseMode::Naive), run(ReuseMode::Error));
-    eprintln!("rays per tick: naive {naive:?}, error {error:?}");
-    assert_eq!(naive[0], error[0], "the first tick traces the same paths");
-    for t in 1..naive.len() {
-        assert!(naive[t] > 0, "tick {t}: nothing moved?");
-        assert!(error[t] <= naive[t], "tick {t}: error traced {} rays, naive {}", error[t], naive[t]);
+        .collect()
+}
+
+#[test]
+fn error_mode_traces_fewer_rays_than_naive_where_a_move_leaves_photons_in_place() {
+    // Property (§3.3, rule 4 of `error.rs`): a cube sliding along x leaves the photons on its four
+    // faces parallel to x where they were, so error mode re-intersects their segments, finds the
+    // stored ends and keeps the paths, where naive retraces every path ending on the cube. With
+    // the same seed it traces at least a tenth fewer full-scene rays than naive, tick by tick
+    // (its verification rays included). Where nothing is kept the two trace the same rays up to
+    // the random lengths of fresh tails, so the margin is what tells them apart. Negative
+    // control: with `SAME_PLACE` = 0 no new end counts as the stored one, and this fails.
+    let device = Device::new(2).unwrap();
+    let naive = full_scene_rays_while_a_cube_slides(ReuseMode::Naive, &device);
+    let error = full_scene_rays_while_a_cube_slides(ReuseMode::Error, &device);
+    eprintln!("full-scene rays per tick: naive {naive:?}, error {error:?}");
+    for (t, (n, e)) in naive.iter().zip(&error).enumerate() {
+        assert!(*n > 0, "tick {}: nothing moved?", t + 1);
+        assert!(*e as f64 <= 0.9 * *n as f64, "tick {}: error traced {e} rays, naive {n}", t + 1);
     }
 }
 

@@ -3,8 +3,11 @@
 //! reflected at each new vertex stays within `threshold` of what was stored.
 //!
 //! For segment k from vertex k−1 (the light for k = 0) towards photon k:
-//! 1. Skip rule: if the segment misses every moved box, neither end lies on a moved object, and
-//!    its start did not move, nothing can have changed: no ray.
+//! 1. Skip rule: if the segment misses every moved box, or passes through one but meets none of
+//!    the moved surfaces where they are now (an occlusion ray against them alone, `verify.rs`),
+//!    neither end lies on a moved object, and its start did not move, nothing can have
+//!    changed: no ray against the full scene. (Where the moved surfaces were needs no test: the
+//!    stored segment was traced with them there, so it either ends on one or misses them.)
 //! 2. Otherwise trace a ray from the (possibly moved) start towards the stored end. Nothing or a
 //!    light hit: the path now ends there (it leaves the scene; lights absorb).
 //! 3. At the new end, compare the energy reflected towards the next stored vertex,
@@ -28,7 +31,7 @@
 //! the estimate low: the path would go on with probability q_old·q_new instead of q_new.
 use super::store::PathStore;
 use super::trace::{leaving, path_origin, photon_at, put_photon, surface_normal, Photon, Retrace};
-use super::verify::Changes;
+use super::verify::{Changes, VerifyWork};
 use crate::core::{PackedDir, Rgb};
 use crate::embree::Ray;
 use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
@@ -50,13 +53,12 @@ pub enum Outcome {
 }
 
 /// Verification of one path: its outcome, the photons that moved (row, new photon) with their
-/// stored energies kept, the rays traced and the box tests made.
+/// stored energies kept, and what the check cost.
 #[derive(Clone, Debug)]
 pub struct Checked {
     pub outcome: Outcome,
     pub moved: Vec<(u32, Photon)>,
-    pub rays: u64,
-    pub tests: u64,
+    pub work: VerifyWork,
 }
 
 /// Energy reflected at photon `p` (lying on `material`) towards `out`, per unit arriving flux.
@@ -93,7 +95,7 @@ pub fn check_path(
         escape,
         segments: photons + u32::from(escape != Vec3::ZERO),
     };
-    let mut out = Checked { outcome: Outcome::Valid, moved: Vec::new(), rays: 0, tests: 0 };
+    let mut out = Checked { outcome: Outcome::Valid, moved: Vec::new(), work: VerifyWork::default() };
     let mut at = Cursor { start: path_origin(scene, store, path), start_object: None, updated: None };
     for k in 0..check.segments {
         // Only the end's position and object are read until a ray is needed.
@@ -105,8 +107,7 @@ pub fn check_path(
             None => (escape, f32::INFINITY),
         };
         let crossing = changes.crosses(mask, k, at.start, dir, t_max);
-        out.tests += crossing.tests;
-        out.rays += crossing.rays;
+        out.work.count(crossing);
         let end_moved = stored_end.is_some_and(|(_, o)| changes.moved[o as usize]);
         let start_on_moved = at.start_object.is_some_and(|o| changes.moved[o as usize]);
         if !crossing.crossed && !end_moved && at.updated.is_none() && !start_on_moved {
@@ -117,6 +118,12 @@ pub fn check_path(
             }
             at = Cursor { start: end_position, start_object: Some(end_object), updated: None };
             continue;
+        }
+        // The escape segment met no object; a moved one now lies on it (the exact test, from a
+        // start that did not move), so a full-scene ray could only find an object: retrace it.
+        if stored_end.is_none() && at.updated.is_none() && !start_on_moved && changes.object_crosses(&crossing) {
+            out.outcome = Outcome::Retrace(Retrace::KeepSegment(k));
+            return out;
         }
         let Some(next) = check.traced_segment(k, &at, stored_end.is_some(), dir, &mut out) else { return out };
         at = next;
@@ -216,7 +223,7 @@ impl PathCheck<'_> {
                 leaving(scene, &at.updated.unwrap_or_else(|| photon_at(self.store, self.path, k as usize - 1)), dir_n)
             }
         };
-        out.rays += 1;
+        out.work.scene_rays += 1;
         let hit = accel.scene().intersect1(&Ray::new(ray_origin, dir_n));
         if !has_end {
             // The escape segment: valid while it still meets no object (nothing, or a light).

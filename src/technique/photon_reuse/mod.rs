@@ -19,11 +19,13 @@
 //! 3. **Dynamic occlusions** (§3.2–3.3): a bounce-row screen (`verify.rs`) passes on only the
 //!    paths with a segment near a moved box or ending on a moved or edited object; those are
 //!    tested segment by segment from the light against the old and new world bounds of every
-//!    moved surface (a small BVH over the boxes) and against edited materials. `naive`: a
-//!    segment in a box is tested exactly against the moved surfaces where they were and where
-//!    they are (two small Embree scenes); the first segment so crossed, or that ends on a moved
-//!    object, is re-intersected and everything after it is traced afresh. `error` (`error.rs`, Algorithm 1): crossed segments are re-traced and the
-//!    path is kept while the energy reflected at each new vertex stays within T of the stored.
+//!    moved surface (a small BVH over the boxes) and against edited materials. In both modes a
+//!    segment in a box is then tested exactly against the moved surfaces where they are now (a
+//!    small Embree scene; where they were needs no test, see `Changes::with_geometry`).
+//!    `naive`: the first segment so crossed, or that ends on a moved object, is re-intersected
+//!    and everything after it is traced afresh. `error` (`error.rs`, Algorithm 1): crossed
+//!    segments are re-traced and the path is kept while the energy reflected at each new vertex
+//!    stays within T of the stored.
 //! 4. **Prune and fill** (`lights.rs`, eq. 1) for lights that moved or whose map has not yet
 //!    settled, then trace fills and retraces in parallel.
 //! 5. Update the photon grid in place for the paths whose photons changed (`grid.rs`: cost in
@@ -366,11 +368,11 @@ impl Technique for PhotonReuse {
         stats.memory.set("grid", self.grid.memory_bytes());
         stats.memory.set("pixels", self.pixels.memory_bytes());
         // Photon rays count by query: closest-hit (verification, retraces, fills) as secondary,
-        // occlusion (primary-segment checks of moved lights) as shadow rays.
+        // occlusion (primary-segment checks of moved lights, crossing tests) as shadow rays.
         let counts = RayCounts {
             primary: rays.camera,
             secondary: rays.specular + stats.verify_rays + stats.retrace_rays + stats.fill_rays,
-            shadow: rays.shadow + stats.origin_rays,
+            shadow: rays.shadow + stats.origin_rays + stats.crossing_rays,
         };
         Ok(RenderStats { rays: counts, detail: TechniqueStats::PhotonReuse(Box::new(stats)) })
     }

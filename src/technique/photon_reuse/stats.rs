@@ -2,6 +2,7 @@
 //! structure. Times in milliseconds, memory in bytes.
 use super::pixels::FollowCounts;
 use super::store::StoreMemory;
+use super::verify::VerifyWork;
 use serde::{Deserialize, Serialize};
 
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
@@ -25,8 +26,11 @@ pub struct PhotonStats {
     // Rays by kind.
     /// Occlusion rays checking the new primary segments of moved lights.
     pub origin_rays: u64,
-    /// Visibility rays of `error` mode's verification.
+    /// Closest-hit rays against the full scene of `error` mode's verification.
     pub verify_rays: u64,
+    /// Occlusion rays of verification against the moved surfaces alone (the exact crossing
+    /// test of a segment in a moved box, both modes).
+    pub crossing_rays: u64,
     /// Rays of retraced segments.
     pub retrace_rays: u64,
     /// Rays of paths filled into distribution-map cells.
@@ -84,6 +88,13 @@ pub struct PhotonStats {
 impl PhotonStats {
     /// Rays traced for photon paths this tick: verification, retraced and filled segments.
     pub fn photon_rays(&self) -> u64 {
-        self.origin_rays + self.verify_rays + self.retrace_rays + self.fill_rays
+        self.origin_rays + self.crossing_rays + self.verify_rays + self.retrace_rays + self.fill_rays
+    }
+
+    /// Adds what verification cost.
+    pub fn count_verification(&mut self, work: VerifyWork) {
+        self.verify_box_tests += work.tests;
+        self.crossing_rays += work.crossing_rays;
+        self.verify_rays += work.scene_rays;
     }
 }

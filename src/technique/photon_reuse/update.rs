@@ -6,7 +6,7 @@ use super::distribution::{DistributionMap, EmissionFrame};
 use super::lights::{self, MappedLight, Moved};
 use super::store::PathStore;
 use super::trace::Retrace;
-use super::verify::{self, Changes, Standing};
+use super::verify::{self, Changes, Standing, VerifyWork};
 use super::{error, ms, PhotonReuse, ReuseMode};
 use crate::scene::edits::SceneDelta;
 use crate::technique::box_tree::BOX_SLACK;
@@ -226,38 +226,33 @@ impl PhotonReuse {
         let scene = ctx.scene;
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
         let changes = Changes::new(scene, delta, BOX_SLACK * diagonal);
-        // Naive mode retraces every crossed segment, so an exact crossing test saves retraces;
-        // error mode re-intersects crossed segments anyway, and on the benchmarks the test cost
-        // it as much as it saved (`docs/benchmarks.md`).
-        let changes = match self.config.reuse {
-            ReuseMode::Naive => changes.with_geometry(ctx.accel, delta),
-            _ => changes,
-        };
+        // A segment in a moved box is tested against the moved surfaces alone before it is
+        // retraced (naive) or re-intersected with the full scene (error): on the walker that
+        // took error mode's verify stage from 17 to 14 ms a tick (`docs/benchmarks.md`, stop 48).
+        let changes = changes.with_geometry(ctx.accel, delta);
         let t = Instant::now();
         let (screened, screen_tests) = verify::screen(scene, store, &changes, standing);
         self.pending.screen_ms = ms(t);
         self.pending.screened = screened.len() as u64;
         self.pending.verify_box_tests += screen_tests;
         if self.config.reuse == ReuseMode::Naive {
-            let (tests, rays, failed) = check_all(&screened, |i, mask| {
-                let (retrace, tests, rays) = verify::check_path(scene, store, i, &changes, mask);
-                (tests, rays, retrace)
+            let (work, failed) = check_all(&screened, |i, mask| {
+                let (retrace, work) = verify::check_path(scene, store, i, &changes, mask);
+                (work, retrace)
             });
-            self.pending.verify_box_tests += tests;
-            self.pending.verify_rays += rays;
+            self.pending.count_verification(work);
             for (i, r) in failed {
                 plan[i] = Some(r);
             }
             return false;
         }
         let threshold = self.config.threshold;
-        let (tests, rays, decided) = check_all(&screened, |i, mask| {
+        let (work, decided) = check_all(&screened, |i, mask| {
             let c = error::check_path(scene, ctx.accel, store, i, &changes, threshold, mask);
             let decided = c.outcome != error::Outcome::Valid || !c.moved.is_empty();
-            (c.tests, c.rays, decided.then_some(c))
+            (c.work, decided.then_some(c))
         });
-        self.pending.verify_box_tests += tests;
-        self.pending.verify_rays += rays;
+        self.pending.count_verification(work);
         let moved_photons = !decided.is_empty();
         for (i, c) in decided {
             plan[i] = error::apply(store, i, c);
@@ -267,27 +262,27 @@ impl PhotonReuse {
     }
 }
 
-/// Runs `check` on every screened (path, mask) in parallel: the sums of its box tests and rays,
-/// and the results it returns, with their paths. Results are moved, never cloned.
+/// Runs `check` on every screened (path, mask) in parallel: the sum of what the checks cost,
+/// and the results they return, with their paths. Results are moved, never cloned.
 fn check_all<T: Send>(
     screened: &[(u32, u16)],
-    check: impl Fn(usize, u16) -> (u64, u64, Option<T>) + Sync,
-) -> (u64, u64, Vec<(usize, T)>) {
+    check: impl Fn(usize, u16) -> (VerifyWork, Option<T>) + Sync,
+) -> (VerifyWork, Vec<(usize, T)>) {
     screened
         .par_iter()
         .fold(
-            || (0u64, 0u64, Vec::new()),
-            |(tests, rays, mut out), &(i, mask)| {
-                let (t, r, result) = check(i as usize, mask);
+            || (VerifyWork::default(), Vec::new()),
+            |(work, mut out), &(i, mask)| {
+                let (w, result) = check(i as usize, mask);
                 out.extend(result.map(|x| (i as usize, x)));
-                (tests + t, rays + r, out)
+                (work + w, out)
             },
         )
         .reduce(
-            || (0, 0, Vec::new()),
-            |(tests, rays, mut out), (more_tests, more_rays, rest)| {
+            || (VerifyWork::default(), Vec::new()),
+            |(work, mut out), (more, rest)| {
                 out.extend(rest);
-                (tests + more_tests, rays + more_rays, out)
+                (work + more, out)
             },
         )
 }

@@ -1,5 +1,5 @@
 //! Verifying stored paths against what changed this tick (naive mode, Moreau et al. §3.2), and
-//! the screen and box tests both modes share.
+//! the screen, box tests and exact crossing test both modes share.
 //!
 //! Segments are tested in order from the light against the world AABBs of every surface that
 //! moved, both where it was and where it is, widened by `BOX_SLACK` of the scene's diagonal (a
@@ -66,6 +66,8 @@ pub struct Changes {
     /// The moved surfaces alone, where they are now: a segment whose box test passes is
     /// crossed only if it meets one of them ([`Changes::with_geometry`]).
     geometry: Option<CommittedScene>,
+    /// A light's shape is among the moved surfaces.
+    light_moved: bool,
 }
 
 /// Whether a segment may be crossed by a moved surface, and what finding out cost.
@@ -76,6 +78,34 @@ pub struct Crossing {
     pub tests: u64,
     /// Occlusion rays against the moved surfaces.
     pub rays: u64,
+}
+
+/// What verifying paths cost: box tests, occlusion rays against the moved surfaces alone (the
+/// exact crossing test), and rays against the full scene (`error` mode's re-intersections).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct VerifyWork {
+    pub tests: u64,
+    pub crossing_rays: u64,
+    pub scene_rays: u64,
+}
+
+impl VerifyWork {
+    /// Adds what one crossing test cost.
+    pub fn count(&mut self, crossing: Crossing) {
+        self.tests += crossing.tests;
+        self.crossing_rays += crossing.rays;
+    }
+}
+
+impl std::ops::Add for VerifyWork {
+    type Output = VerifyWork;
+    fn add(self, o: VerifyWork) -> VerifyWork {
+        VerifyWork {
+            tests: self.tests + o.tests,
+            crossing_rays: self.crossing_rays + o.crossing_rays,
+            scene_rays: self.scene_rays + o.scene_rays,
+        }
+    }
 }
 
 impl Changes {
@@ -104,7 +134,18 @@ impl Changes {
         let boxes = BoxTree::new(boxes);
         let cover = boxes.cover(COVER_BOXES);
         let cover_bounds = cover.iter().copied().reduce(|a, b| a.union(&b));
-        Changes { boxes, cover, cover_bounds, moved, translated, previous_material, flagged, geometry: None }
+        let light_moved = delta.moved.iter().any(|m| matches!(m.surface, SurfaceId::Light(_)));
+        Changes {
+            boxes,
+            cover,
+            cover_bounds,
+            moved,
+            translated,
+            previous_material,
+            flagged,
+            geometry: None,
+            light_moved,
+        }
     }
 
     /// Adds the exact test: after a box hit, the segment is tested against the moved surfaces
@@ -136,6 +177,12 @@ impl Changes {
             let segment = Segment::new(start, end - start, 1.0);
             self.cover.iter().any(|b| segment.touches(b))
         }
+    }
+
+    /// Whether `crossing` found a moved object (not a light) on its segment for certain: the
+    /// exact test ran and every moved surface is an object's.
+    pub fn object_crosses(&self, crossing: &Crossing) -> bool {
+        crossing.crossed && crossing.rays > 0 && !self.light_moved
     }
 
     /// Whether segment k (its bit in `mask`) may cross a moved box, and the box tests made.
@@ -239,20 +286,20 @@ fn screen_chunk(
     tests
 }
 
-/// The retrace a path needs, or `None` if it is still valid. Also returns the box tests and
-/// occlusion rays made. `mask`: the screen's bits (segments that need the box tree).
+/// The retrace a path needs, or `None` if it is still valid, and what finding out cost.
+/// `mask`: the screen's bits (segments that need the box tree).
 pub fn check_path(
     scene: &Scene,
     store: &PathStore,
     path: usize,
     changes: &Changes,
     mask: u16,
-) -> (Option<Retrace>, u64, u64) {
+) -> (Option<Retrace>, VerifyWork) {
     let photons = store.word[path].photons();
     let escaped = store.escape[path] != PackedDir::NONE;
     let segments = photons + u32::from(escaped);
     let mut start = path_origin(scene, store, path);
-    let (mut tests, mut rays) = (0u64, 0u64);
+    let mut work = VerifyWork::default();
     for k in 0..segments {
         let ends_on_photon = k < photons;
         let (dir, t_max) = if ends_on_photon {
@@ -263,27 +310,26 @@ pub fn check_path(
         };
         // A moved surface may now cross the segment (where it was, or where it is).
         let crossing = changes.crosses(mask, k, start, dir, t_max);
-        tests += crossing.tests;
-        rays += crossing.rays;
+        work.count(crossing);
         if crossing.crossed {
-            return (Some(Retrace::KeepSegment(k)), tests, rays);
+            return (Some(Retrace::KeepSegment(k)), work);
         }
         if ends_on_photon {
             let object = store.surfaces.object(store.rows[k as usize].surface[path]) as usize;
             // The segment ends on an object that moved: its end point is stale.
             if changes.moved[object] {
-                return (Some(Retrace::KeepSegment(k)), tests, rays);
+                return (Some(Retrace::KeepSegment(k)), work);
             }
             // The photon's surface reflects differently now: retrace what it reflected, and draw
             // the roulette again where it ended the path.
             if changes.previous_material[object].is_some() {
                 let goes_on = k + 1 < segments || k + 1 < store.max_photons as u32;
-                return (goes_on.then_some(Retrace::FreshFrom(k + 1)), tests, rays);
+                return (goes_on.then_some(Retrace::FreshFrom(k + 1)), work);
             }
             start = store.rows[k as usize].position[path];
         }
     }
-    (None, tests, rays)
+    (None, work)
 }
 
 #[cfg(test)]
