@@ -228,7 +228,7 @@ impl PhotonReuse {
         let changes = Changes::new(scene, delta, BOX_SLACK * diagonal);
         // A segment in a moved box is tested against the moved surfaces alone before it is
         // retraced (naive) or re-intersected with the full scene (error): on the walker that
-        // took error mode's verify stage from 17 to 14 ms a tick (`docs/benchmarks.md`, stop 48).
+        // took about 8% off error mode's verify stage (`docs/benchmarks.md`, stop 48).
         let changes = changes.with_geometry(ctx.accel, delta);
         let t = Instant::now();
         let (screened, screen_tests) = verify::screen(scene, store, &changes, standing);
