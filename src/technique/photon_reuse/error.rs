@@ -31,7 +31,7 @@
 //! the estimate low: the path would go on with probability q_old·q_new instead of q_new.
 use super::store::PathStore;
 use super::trace::{leaving, path_origin, photon_at, put_photon, surface_normal, Photon, Retrace};
-use super::verify::{Changes, VerifyWork};
+use super::verify::{Changes, Crossing, VerifyWork};
 use crate::core::{PackedDir, Rgb};
 use crate::embree::Ray;
 use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
@@ -106,11 +106,13 @@ pub fn check_path(
             Some((position, _)) => (position - at.start, 1.0),
             None => (escape, f32::INFINITY),
         };
-        let crossing = changes.crosses(mask, k, at.start, dir, t_max);
-        out.work.count(crossing);
         let end_moved = stored_end.is_some_and(|(_, o)| changes.moved[o as usize]);
         let start_on_moved = at.start_object.is_some_and(|o| changes.moved[o as usize]);
-        if !crossing.crossed && !end_moved && at.updated.is_none() && !start_on_moved {
+        // A segment with a moved end, or from a start that moved, is traced whatever crosses it.
+        let traced = end_moved || at.updated.is_some() || start_on_moved;
+        let crossing = if traced { Crossing::default() } else { changes.crosses(mask, k, at.start, dir, t_max) };
+        out.work.count(crossing);
+        if !crossing.crossed && !traced {
             let Some((end_position, end_object)) = stored_end else { break };
             if let Some(outcome) = check.untraced_end(k, end_position, end_object) {
                 out.outcome = outcome;
@@ -121,7 +123,7 @@ pub fn check_path(
         }
         // The escape segment met no object; a moved one now lies on it (the exact test, from a
         // start that did not move), so a full-scene ray could only find an object: retrace it.
-        if stored_end.is_none() && at.updated.is_none() && !start_on_moved && changes.object_crosses(&crossing) {
+        if stored_end.is_none() && !traced && changes.object_crosses(&crossing) {
             out.outcome = Outcome::Retrace(Retrace::KeepSegment(k));
             return out;
         }

@@ -308,18 +308,18 @@ pub fn check_path(
         } else {
             (store.escape[path].get(), f32::INFINITY)
         };
+        let end_object = ends_on_photon.then(|| store.surfaces.object(store.rows[k as usize].surface[path]) as usize);
+        // The segment ends on an object that moved: its end point is stale, whatever crosses it.
+        if end_object.is_some_and(|o| changes.moved[o]) {
+            return (Some(Retrace::KeepSegment(k)), work);
+        }
         // A moved surface may now cross the segment (where it was, or where it is).
         let crossing = changes.crosses(mask, k, start, dir, t_max);
         work.count(crossing);
         if crossing.crossed {
             return (Some(Retrace::KeepSegment(k)), work);
         }
-        if ends_on_photon {
-            let object = store.surfaces.object(store.rows[k as usize].surface[path]) as usize;
-            // The segment ends on an object that moved: its end point is stale.
-            if changes.moved[object] {
-                return (Some(Retrace::KeepSegment(k)), work);
-            }
+        if let Some(object) = end_object {
             // The photon's surface reflects differently now: retrace what it reflected, and draw
             // the roulette again where it ended the path.
             if changes.previous_material[object].is_some() {
