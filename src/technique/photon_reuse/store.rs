@@ -111,6 +111,12 @@ impl SurfaceIds {
         self.object_of_block[(id >> self.shift) as usize]
     }
 
+    /// `per_object`, looked up per block of ids, with the shift that finds an id's block: one
+    /// load per id instead of two.
+    pub fn per_block(&self, per_object: &[bool]) -> (Vec<bool>, u32) {
+        (self.object_of_block.iter().map(|&o| per_object[o as usize]).collect(), self.shift)
+    }
+
     pub fn object_and_prim(&self, id: u32) -> (u32, u32) {
         let object = self.object(id);
         (object, id - self.first[object as usize])

@@ -208,10 +208,11 @@ impl Changes {
 /// light's new primary segment was already verified) or ends on a flagged object.
 pub fn screen(scene: &Scene, store: &PathStore, changes: &Changes, standing: &[Standing]) -> (Vec<(u32, u16)>, u64) {
     let mut masks = vec![0u16; store.paths];
+    let flagged = store.surfaces.per_block(&changes.flagged);
     let tests: u64 = masks
         .par_chunks_mut(SCREEN_CHUNK)
         .enumerate()
-        .map(|(c, masks)| screen_chunk(scene, store, changes, standing, c * SCREEN_CHUNK, masks))
+        .map(|(c, masks)| screen_chunk(scene, store, (changes, &flagged), standing, c * SCREEN_CHUNK, masks))
         .sum();
     let flagged = masks.into_par_iter().enumerate().filter(|&(_, m)| m != 0).map(|(i, m)| (i as u32, m)).collect();
     (flagged, tests)
@@ -225,7 +226,7 @@ pub fn screen(scene: &Scene, store: &PathStore, changes: &Changes, standing: &[S
 fn screen_chunk(
     scene: &Scene,
     store: &PathStore,
-    changes: &Changes,
+    (changes, (flagged, shift)): (&Changes, &(Vec<bool>, u32)),
     standing: &[Standing],
     first: usize,
     masks: &mut [u16],
@@ -250,7 +251,7 @@ fn screen_chunk(
         let (ends, surfaces) = (&row.position[range.clone()], &row.surface[range.clone()]);
         for &j in &live {
             let j = j as usize;
-            if changes.flagged[store.surfaces.object(surfaces[j]) as usize] {
+            if flagged[(surfaces[j] >> shift) as usize] {
                 masks[j] |= 1 << k;
                 continue;
             }
