@@ -464,6 +464,9 @@ fn accumulate(film: &mut Film, scene: &Scene, shaded: &[Shaded], indirect: &[Opt
 /// Computes the records made this pass (from `first_new` on) and re-evaluates flagged
 /// (on-demand) records some sample uses, in parallel. Returns each one's new-record rays and
 /// refresh.
+///
+/// The new records are the cache's tail, so they are split on their own: one parallel pass over
+/// all records with a filter would leave rayon's last piece, and one worker, with all of them.
 fn compute_records(
     ctx: &RenderContext,
     cache: &mut Cache,
@@ -473,29 +476,37 @@ fn compute_records(
     states: &[SampleState],
     min_distance: f32,
 ) -> Vec<(u64, Option<Refresh>)> {
-    let flagged_used = match changes {
-        Some(_) => pixels::used(first_new, states),
-        None => Vec::new(),
-    };
     let tick = ctx.tick;
-    cache
-        .records
+    let (old, new) = cache.records.split_at_mut(first_new);
+    let mut works: Vec<(u64, Option<Refresh>)> = new
         .par_iter_mut()
-        .enumerate()
-        .filter(|(i, r)| *i >= first_new || (r.stale && flagged_used.get(*i) == Some(&true)))
-        .map(|(i, r)| {
-            if i >= first_new {
-                let (fresh, rays) =
-                    cache::compute_record(ctx.accel, vpls, r.position, r.normal, r.object, min_distance, tick);
-                *r = fresh;
-                (rays, None)
-            } else {
-                r.stale = false;
-                (0, changes.map(|c| c.refresh(ctx.accel, vpls, r, min_distance)))
-            }
+        .with_max_len(RECORDS_PER_JOB)
+        .map(|r| {
+            let (fresh, rays) =
+                cache::compute_record(ctx.accel, vpls, r.position, r.normal, r.object, min_distance, tick);
+            *r = fresh;
+            (rays, None)
         })
-        .collect()
+        .collect();
+    if let Some(changes) = changes {
+        let flagged_used = pixels::used(first_new, states);
+        let refreshed = old
+            .par_iter_mut()
+            .with_max_len(RECORDS_PER_JOB)
+            .zip(flagged_used.par_iter())
+            .filter(|(r, &used)| r.stale && used)
+            .map(|(r, _)| {
+                r.stale = false;
+                (0, Some(changes.refresh(ctx.accel, vpls, r, min_distance)))
+            });
+        works.par_extend(refreshed);
+    }
+    works
 }
+
+/// Records per parallel job in [`compute_records`]: few enough that two workers share a
+/// pass's hundred-odd new records evenly.
+const RECORDS_PER_JOB: usize = 8;
 
 impl Technique for InstantCache {
     fn id(&self) -> &'static str {

@@ -327,9 +327,13 @@ impl AtomicFlags {
         AtomicFlags((0..len).map(|_| AtomicBool::new(false)).collect())
     }
 
+    /// Sets flag `i`. A flag already set is only read: the samples of both workers' rows
+    /// share records, and a store to a line the other core holds would take it from there.
     fn set(&self, i: u32) {
         if let Some(flag) = self.0.get(i as usize) {
-            flag.store(true, Ordering::Relaxed);
+            if !flag.load(Ordering::Relaxed) {
+                flag.store(true, Ordering::Relaxed);
+            }
         }
     }
 
