@@ -155,9 +155,13 @@ impl PixelCache {
         let mut counts = FollowCounts::default();
         let touched = self.splat(scene, grid, changed, &fates, &mut counts);
         let k = grid.kernel_area() as f64;
-        let restarts: Vec<(usize, PixelSample, RenderRays)> = (0..self.samples.len())
+        // The pixels to redo lie where the moves are, often in one band of rows: listed first,
+        // they split evenly between the workers (a filter over all pixels would hand one band,
+        // and one worker, most of them).
+        let redo: Vec<usize> =
+            (0..self.samples.len()).into_par_iter().filter(|&i| fates[i] != Fate::Kept || touched[i]).collect();
+        let restarts: Vec<(usize, PixelSample, RenderRays)> = redo
             .into_par_iter()
-            .filter(|&i| fates[i] != Fate::Kept || touched[i])
             .map(|i| {
                 // Streams apart from any full pass's (those use small pass numbers).
                 let mut rng = Rng::for_sample(seed, tick, i as u64, u64::MAX);
