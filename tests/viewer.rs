@@ -60,8 +60,11 @@ async fn wait_for(c: &fantoccini::Client, script: &str, done: impl Fn(&Value) ->
     }
 }
 
-/// A WebDriver session on headless Chromium.
-async fn browser(port: u16) -> fantoccini::Client {
+/// A WebDriver session on headless Chromium, through a chromedriver of its own. The driver's
+/// port is found free and then bound by chromedriver, so another process (the other test's
+/// server or browser) can take it in between; then the session request meets the wrong
+/// listener and fails. Such a start is retried on a new port, up to three times.
+async fn browser() -> (Driver, fantoccini::Client) {
     let caps = json!({
         "goog:chromeOptions": {
             "binary": CHROMIUM,
@@ -70,19 +73,27 @@ async fn browser(port: u16) -> fantoccini::Client {
                      "--window-size=1280,900"]
         }
     });
-    let connector = hyper_util::client::legacy::connect::HttpConnector::new();
-    ClientBuilder::new(connector)
-        .capabilities(caps.as_object().unwrap().clone())
-        .connect(&format!("http://127.0.0.1:{port}"))
-        .await
-        .expect("WebDriver session")
+    let mut attempt = 0;
+    loop {
+        attempt += 1;
+        let (driver, port) = start_driver().await;
+        let connector = hyper_util::client::legacy::connect::HttpConnector::new();
+        let session = ClientBuilder::new(connector)
+            .capabilities(caps.as_object().unwrap().clone())
+            .connect(&format!("http://127.0.0.1:{port}"))
+            .await;
+        match session {
+            Ok(c) => return (driver, c),
+            Err(e) if attempt < 3 => eprintln!("WebDriver session on port {port} failed ({e}); retrying"),
+            Err(e) => panic!("WebDriver session: {e}"),
+        }
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
     let server = TestServer::start(None, Limits::default()).await;
-    let (_driver, port) = start_driver().await;
-    let c = browser(port).await;
+    let (_driver, c) = browser().await;
 
     c.goto(&server.url("/")).await.unwrap();
     assert_eq!(c.title().await.unwrap(), "relume viewer");
@@ -177,8 +188,7 @@ async fn start_and_wait(c: &fantoccini::Client) -> String {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb() {
     let server = TestServer::start(None, Limits::default()).await;
-    let (_driver, port) = start_driver().await;
-    let c = browser(port).await;
+    let (_driver, c) = browser().await;
     c.goto(&server.url("/")).await.unwrap();
     runs_every_technique(&c, &server).await;
     picks_by_click(&c, &server).await;
