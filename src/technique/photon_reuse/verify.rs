@@ -208,11 +208,11 @@ impl Changes {
 /// light's new primary segment was already verified) or ends on a flagged object.
 pub fn screen(scene: &Scene, store: &PathStore, changes: &Changes, standing: &[Standing]) -> (Vec<(u32, u16)>, u64) {
     let mut masks = vec![0u16; store.paths];
-    let flagged = store.surfaces.per_block(&changes.flagged);
+    let flagged_blocks = store.surfaces.per_block(&changes.flagged);
     let tests: u64 = masks
         .par_chunks_mut(SCREEN_CHUNK)
         .enumerate()
-        .map(|(c, masks)| screen_chunk(scene, store, (changes, &flagged), standing, c * SCREEN_CHUNK, masks))
+        .map(|(c, masks)| screen_chunk(scene, store, (changes, &flagged_blocks), standing, c * SCREEN_CHUNK, masks))
         .sum();
     let flagged = masks.into_par_iter().enumerate().filter(|&(_, m)| m != 0).map(|(i, m)| (i as u32, m)).collect();
     (flagged, tests)
