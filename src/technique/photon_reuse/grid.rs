@@ -69,6 +69,46 @@ struct Cell {
 }
 
 impl Cell {
+    /// Takes the photons with keys `out` (sorted) out and puts `ins` (sorted by key, none of
+    /// them here) in, in place: the photons stay in key order. Returns the photons taken out.
+    fn merge(&mut self, out: &[(u32, u32)], ins: &[(u32, GridPhoton)]) -> Vec<GridPhoton> {
+        let mut removed = Vec::with_capacity(out.len());
+        if !out.is_empty() {
+            let mut gone = out.iter().map(|x| x.1).peekable();
+            self.photons.retain(|p| {
+                while gone.next_if(|&k| k < p.key).is_some() {}
+                let goes = gone.next_if_eq(&p.key).is_some();
+                if goes {
+                    removed.push(*p);
+                }
+                !goes
+            });
+        }
+        if let Some(&(_, first)) = ins.first() {
+            // Merge from the back into the grown vector, so nothing moves twice.
+            let kept = self.photons.len();
+            // Exactly: the grid's memory follows its photons (a cell that lost as many as it
+            // gains reuses the room).
+            self.photons.reserve_exact(ins.len());
+            self.photons.resize(kept + ins.len(), first);
+            let (mut i, mut j) = (kept, ins.len());
+            for w in (0..kept + ins.len()).rev() {
+                if j == 0 {
+                    break;
+                }
+                if i > 0 && self.photons[i - 1].key > ins[j - 1].1.key {
+                    i -= 1;
+                    self.photons[w] = self.photons[i];
+                } else {
+                    j -= 1;
+                    self.photons[w] = ins[j].1;
+                }
+            }
+        }
+        self.sum_power();
+        removed
+    }
+
     fn sum_power(&mut self) {
         self.power = self.photons.iter().fold([0.0; 3], |s, p| add(s, p.power));
     }
@@ -76,6 +116,24 @@ impl Cell {
 
 fn add(s: [f64; 3], p: Rgb) -> [f64; 3] {
     [s[0] + p.r as f64, s[1] + p.g as f64, s[2] + p.b as f64]
+}
+
+/// `items` grouped by slot (all below `slots`), keeping their order within a slot: a counting
+/// sort, linear in the items and the slots.
+fn by_slot<T: Copy>(items: &[(u32, T)], slots: usize) -> Vec<(u32, T)> {
+    let mut start = vec![0usize; slots + 1];
+    for &(slot, _) in items {
+        start[slot as usize + 1] += 1;
+    }
+    for s in 0..slots {
+        start[s + 1] += start[s];
+    }
+    let mut out = items.to_vec();
+    for &item in items {
+        out[start[item.0 as usize]] = item;
+        start[item.0 as usize] += 1;
+    }
+    out
 }
 
 /// A cheap hash for cell coordinates (the gather looks up eight per query).
@@ -274,9 +332,9 @@ impl PhotonGrid {
         }
         let stats = GridUpdate { removed: leaving.len() as u64, added: entering.len() as u64, cells_touched: 0 };
         self.len = self.len + entering.len() - leaving.len();
-        // Both lists are in key order within a slot once sorted by slot (stably).
-        leaving.par_sort_by_key(|&(slot, _)| slot);
-        entering.par_sort_by_key(|&(slot, _)| slot);
+        // Both lists arrive in key order (`paths` is sorted), so grouping them by slot stably
+        // leaves each slot's share in key order.
+        let (leaving, entering) = (by_slot(&leaving, self.cells.len()), by_slot(&entering, self.cells.len()));
         let (touched, removed) = self.merge_changes(&leaving, &entering);
         if new_cells {
             self.sort_order();
@@ -287,7 +345,7 @@ impl PhotonGrid {
     }
 
     /// Applies sorted removals and insertions cell by cell, in parallel: each touched cell is
-    /// merged in one pass, keeping key order. Returns how many cells it touched and the
+    /// merged in place ([`Cell::merge`]), keeping key order. Returns how many cells it touched and the
     /// photons it took out.
     fn merge_changes(&mut self, leaving: &[(u32, u32)], entering: &[(u32, GridPhoton)]) -> (u64, Vec<GridPhoton>) {
         let mut work: Vec<CellChange> = Vec::new();
@@ -315,25 +373,7 @@ impl PhotonGrid {
             .filter(|(s, _)| of_slot[*s] != u32::MAX)
             .flat_map_iter(|(s, cell)| {
                 let (_, out, ins) = work[of_slot[s] as usize];
-                let mut gone = out.iter().map(|x| x.1).peekable();
-                let mut coming = ins.iter().map(|x| x.1).peekable();
-                let mut merged = Vec::with_capacity(cell.photons.len() + ins.len());
-                let mut removed = Vec::with_capacity(out.len());
-                for p in cell.photons.drain(..) {
-                    while gone.next_if(|&k| k < p.key).is_some() {}
-                    if gone.next_if_eq(&p.key).is_some() {
-                        removed.push(p);
-                        continue;
-                    }
-                    while let Some(c) = coming.next_if(|c| c.key < p.key) {
-                        merged.push(c);
-                    }
-                    merged.push(p);
-                }
-                merged.extend(coming);
-                cell.photons = merged;
-                cell.sum_power();
-                removed
+                cell.merge(out, ins)
             })
             .collect();
         (work.len() as u64, removed)
