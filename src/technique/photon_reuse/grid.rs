@@ -308,25 +308,31 @@ impl PhotonGrid {
                 (1..rows).filter_map(move |row| photon_at(scene, store, diffuse, inv_cell, path, row))
             })
             .collect();
-        // What leaves each cell (keys) and what enters it (photons), by cell slot.
-        let mut leaving: Vec<(u32, u32)> = Vec::new();
+        // What leaves each cell (keys) and what enters it (photons), by cell slot: found in
+        // parallel (reads of `home` and the cell index); only new cells are made in order.
+        let keys = |path: usize| (path * self.rows as usize)..((path + 1) * self.rows as usize);
+        let home = &self.home;
+        let leaving: Vec<(u32, u32)> = paths
+            .par_iter()
+            .flat_map_iter(|&path| keys(path).filter(|&k| home[k] != NONE).map(|k| (home[k], k as u32)))
+            .collect();
+        let index = &self.index;
+        let known: Vec<Option<u32>> = fresh.par_iter().map(|(coord, _)| index.get(coord).copied()).collect();
         for &path in paths {
-            for key in (path * self.rows as usize)..((path + 1) * self.rows as usize) {
-                let slot = std::mem::replace(&mut self.home[key], NONE);
-                if slot != NONE {
-                    leaving.push((slot, key as u32));
-                }
-            }
+            self.home[keys(path)].fill(NONE);
         }
         let mut entering: Vec<(u32, GridPhoton)> = Vec::with_capacity(fresh.len());
         let mut new_cells = false;
-        for (coord, photon) in fresh {
-            let next = self.cells.len() as u32;
-            let slot = *self.index.entry(coord).or_insert(next);
-            if slot == next {
-                self.cells.push(Cell { coord, ..Cell::default() });
-                new_cells = true;
-            }
+        for ((coord, photon), known) in fresh.into_iter().zip(known) {
+            let slot = known.unwrap_or_else(|| {
+                let next = self.cells.len() as u32;
+                let slot = *self.index.entry(coord).or_insert(next);
+                if slot == next {
+                    self.cells.push(Cell { coord, ..Cell::default() });
+                    new_cells = true;
+                }
+                slot
+            });
             self.home[photon.key as usize] = slot;
             entering.push((slot, photon));
         }
