@@ -24,7 +24,7 @@ use crate::scene::edits::{Aabb, SceneDelta};
 use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
 use crate::technique::box_tree::{widened, BoxTree, Segment};
 use crate::technique::nee::SHADOW_EPSILON;
-use glam::{Affine3A, Vec3};
+use glam::{Affine3A, Vec3, Vec3A};
 use rayon::prelude::*;
 
 /// Boxes in the screen's cover: enough to keep several separate movers apart, few enough that
@@ -52,8 +52,9 @@ pub struct Changes {
     pub boxes: BoxTree,
     /// At most `COVER_BOXES` boxes containing all of `boxes`.
     cover: Vec<Aabb>,
-    /// The box containing the cover: most segments miss it, and then every cover box.
-    cover_bounds: Option<Aabb>,
+    /// The box containing the cover, as SIMD vectors (empty, min > max, without a cover):
+    /// most segments miss it, and then every cover box.
+    cover_bounds: (Vec3A, Vec3A),
     /// `moved[object]`: the object moved this tick.
     pub moved: Vec<bool>,
     /// `translated[object]`: it moved without turning or scaling, so its surface normals and
@@ -133,7 +134,11 @@ impl Changes {
         let flagged = moved.iter().zip(&previous_material).map(|(&m, p)| m || p.is_some()).collect();
         let boxes = BoxTree::new(boxes);
         let cover = boxes.cover(COVER_BOXES);
-        let cover_bounds = cover.iter().copied().reduce(|a, b| a.union(&b));
+        let cover_bounds = cover
+            .iter()
+            .copied()
+            .reduce(|a, b| a.union(&b))
+            .map_or((Vec3A::INFINITY, Vec3A::NEG_INFINITY), |b| (b.min.into(), b.max.into()));
         let light_moved = delta.moved.iter().any(|m| matches!(m.surface, SurfaceId::Light(_)));
         Changes {
             boxes,
@@ -167,11 +172,13 @@ impl Changes {
     /// the box of its ends, and most miss every cover box there, without a division.
     #[inline]
     fn cover_touched(&self, start: Vec3, end: Vec3) -> bool {
-        let (lo, hi) = (start.min(end), start.max(end));
-        let overlaps = |b: &Aabb| b.min.cmple(hi).all() && lo.cmple(b.max).all();
-        if !self.cover_bounds.as_ref().is_some_and(overlaps) {
+        let (a, b) = (Vec3A::from(start), Vec3A::from(end));
+        let (lo, hi) = (a.min(b), a.max(b));
+        if !(self.cover_bounds.0.cmple(hi) & lo.cmple(self.cover_bounds.1)).all() {
             return false;
         }
+        let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+        let overlaps = |b: &Aabb| b.min.cmple(hi).all() && lo.cmple(b.max).all();
         let near = self.cover.iter().any(overlaps);
         near && {
             let segment = Segment::new(start, end - start, 1.0);
