@@ -34,9 +34,9 @@ pub struct Record {
 }
 
 impl Record {
-    /// A record at `p` with the given contributions; its irradiance is their sum.
+    /// A record at `p` with the given contributions; its irradiance is their sum ([`rgbe::sum`]).
     pub fn new(p: Vec3, n: Vec3, object: u32, contributions: Vec<u32>, tick: u64) -> Record {
-        let irradiance = contributions.iter().fold(Rgb::BLACK, |sum, &c| sum + rgbe::unpack(c));
+        let irradiance = rgbe::sum(&contributions);
         Record { position: p, normal: n, object, irradiance, contributions, last_used: tick, stale: false }
     }
 }
