@@ -177,8 +177,7 @@ impl Changes {
         if !(self.cover_bounds.0.cmple(hi) & lo.cmple(self.cover_bounds.1)).all() {
             return false;
         }
-        let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
-        let overlaps = |b: &Aabb| b.min.cmple(hi).all() && lo.cmple(b.max).all();
+        let overlaps = |b: &Aabb| (Vec3A::from(b.min).cmple(hi) & lo.cmple(Vec3A::from(b.max))).all();
         let near = self.cover.iter().any(overlaps);
         near && {
             let segment = Segment::new(start, end - start, 1.0);
