@@ -19,7 +19,7 @@ use super::cache::{Cache, Record, GONE};
 use super::grid::{Cells, RecordGrid};
 use crate::core::Rgb;
 use crate::technique::camera_chain::CameraSample;
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
@@ -55,7 +55,10 @@ fn look_up_at(cache: &Cache, hit: HitKey, weights: &mut Vec<(u32, f32)>) {
 /// Follows `renumbering` in place; false if one of the records went. An index that stays is
 /// not written: records mostly go from the end (this tick's records on moved objects), so most
 /// lists keep their indices, and their memory is then only read.
-fn renumber(weights: &mut [(u32, f32)], renumbering: &[u32]) -> bool {
+fn renumber(weights: &mut [(u32, f32)], renumbering: &[u32], first_moved: usize) -> bool {
+    if weights.last().is_some_and(|&(i, _)| (i as usize) < first_moved) {
+        return true;
+    }
     weights.iter_mut().all(|(i, _)| {
         let now = renumbering.get(*i as usize).copied().unwrap_or(GONE);
         if now != *i {
@@ -63,6 +66,12 @@ fn renumber(weights: &mut [(u32, f32)], renumbering: &[u32]) -> bool {
         }
         now != GONE
     })
+}
+
+/// The first index a renumbering changes (its length if none): a list of lower indices, in
+/// index order, keeps them all.
+fn first_moved(renumbering: &[u32]) -> usize {
+    renumbering.iter().enumerate().position(|(i, &now)| now != i as u32).unwrap_or(renumbering.len())
 }
 
 /// A still tick's shortcut: if every camera sample was kept (`kept`), so each found last
@@ -84,13 +93,14 @@ pub fn keep_lists(
     renumbering: Option<&[u32]>,
     keep: bool,
 ) -> Vec<bool> {
+    let first_moved = renumbering.map_or(0, first_moved);
     states
         .par_iter_mut()
         .zip(kept)
         .enumerate()
         .map(|(i, (state, &kept))| {
             let stays = keep && kept && !state.weights.is_empty();
-            if stays && renumbering.is_none_or(|map| renumber(&mut state.weights, map)) {
+            if stays && renumbering.is_none_or(|map| renumber(&mut state.weights, map, first_moved)) {
                 return false;
             }
             state.hit = hit(i);
@@ -110,6 +120,9 @@ pub struct NewRecords {
     /// The new records' indices by position.
     records: RecordGrid<u32>,
     reach: f32,
+    /// A box around every new record and twice its reach (a margin that rounding cannot eat):
+    /// a point outside it needs no cell lookup.
+    bounds: (Vec3A, Vec3A),
     pub count: u64,
 }
 
@@ -117,13 +130,16 @@ impl NewRecords {
     pub fn new(lo: Vec3, hi: Vec3, reach: f32) -> NewRecords {
         let cells = Cells::new(lo, hi, reach);
         let records = RecordGrid::new(lo, hi, reach);
-        NewRecords { marked: vec![false; cells.len()], cells, records, reach, count: 0 }
+        let bounds = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        NewRecords { marked: vec![false; cells.len()], cells, records, reach, bounds, count: 0 }
     }
 
     /// Marks the cells the record `index` at `p` may reach.
     fn mark(&mut self, index: u32, p: Vec3) {
         self.records.insert(index, p);
         self.count += 1;
+        let (a, reach) = (Vec3A::from(p), Vec3A::splat(2.0 * self.reach));
+        self.bounds = (self.bounds.0.min(a - reach), self.bounds.1.max(a + reach));
         let c = self.cells.cell_of(p);
         for dz in -1..=1 {
             for dy in -1..=1 {
@@ -140,7 +156,10 @@ impl NewRecords {
 
     /// May a record made this tick reach `p`?
     pub fn near(&self, p: Vec3) -> bool {
-        self.count > 0 && self.marked[self.cells.index(self.cells.cell_of(p))]
+        let a = Vec3A::from(p);
+        a.cmpge(self.bounds.0).all()
+            && a.cmple(self.bounds.1).all()
+            && self.marked[self.cells.index(self.cells.cell_of(p))]
     }
 
     /// Appends to `weights` the new records with w > 1 at `hit`, by index. A kept list holds
@@ -307,7 +326,7 @@ pub fn audit(
             }
             let needed = previous.get(k).is_none_or(|p| {
                 let mut old = p.weights.clone();
-                let stayed = renumbering.is_none_or(|map| renumber(&mut old, map));
+                let stayed = renumbering.is_none_or(|map| renumber(&mut old, map, 0));
                 p.hit != s.hit || !stayed || bits(&old) != bits(&fresh)
             });
             let mismatched = hit(k) != s.hit || bits(&fresh) != bits(&s.weights);
