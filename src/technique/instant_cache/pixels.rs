@@ -54,7 +54,9 @@ fn look_up_at(cache: &Cache, hit: HitKey, weights: &mut Vec<(u32, f32)>) {
 
 /// Follows `renumbering` in place; false if one of the records went. An index that stays is
 /// not written: records mostly go from the end (this tick's records on moved objects), so most
-/// lists keep their indices, and their memory is then only read.
+/// lists keep their indices, and their memory is then only read. A list whose last (highest)
+/// index is below `first_moved`, the first index the renumbering changes, is not read further
+/// (0 reads every list).
 fn renumber(weights: &mut [(u32, f32)], renumbering: &[u32], first_moved: usize) -> bool {
     if weights.last().is_some_and(|&(i, _)| (i as usize) < first_moved) {
         return true;
@@ -156,9 +158,11 @@ impl NewRecords {
 
     /// May a record made this tick reach `p`?
     pub fn near(&self, p: Vec3) -> bool {
+        // Written so that a NaN coordinate passes the box and meets the cells, as a fresh lookup
+        // does (it clamps NaN into cell 0).
         let a = Vec3A::from(p);
-        a.cmpge(self.bounds.0).all()
-            && a.cmple(self.bounds.1).all()
+        !a.cmplt(self.bounds.0).any()
+            && !a.cmpgt(self.bounds.1).any()
             && self.marked[self.cells.index(self.cells.cell_of(p))]
     }
 
