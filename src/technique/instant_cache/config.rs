@@ -77,11 +77,14 @@ impl Default for InstantCacheConfig {
     }
 }
 
-/// θ's default, in degrees. Against `path` (`bench error`, relMSE) next to the paper's 4.05°:
-/// bunnies-1 (flat-shaded triangles) 0.0336 against 0.0325 with 154 records made per frame
-/// instead of 570; merry-go-round 0.0616 against 0.0607; walker equal; the Cornell box 0.0207
-/// against 0.0208 (its error swings with where records fall: 0.0272 at 6–10°).
-pub const DEFAULT_NORMAL_TOLERANCE: f32 = 20.0;
+/// θ's default, in degrees, chosen by `relume bench error` (relMSE against 1024-spp `path`,
+/// docs/benchmarks.md, stop 52). With 256 VPLs the error is mostly the VPL set's, and a record
+/// that serves a wider cone of normals averages more of it away: from 20° to 40°, bunnies-1 at
+/// 256² 0.0177 → 0.0137 (records made a frame 154 → 76), merry-go-round 0.0615 → 0.0586, a
+/// diffuse sphere 0.0220 → 0.0213, walker, maze and the Cornell box unchanged. Once a still
+/// view has refined for 64 ticks the interpolation's own blur shows: the sphere 0.00527 →
+/// 0.00542 (60°: 0.00554), the Cornell box unchanged.
+pub const DEFAULT_NORMAL_TOLERANCE: f32 = 40.0;
 
 /// Records a sample's interpolation holds, for the memory estimate (about 10 on the bundled
 /// scenes at the default caching radius).

@@ -54,7 +54,7 @@
 //! | `vpls` | 256 | VPLs per tick, on average (⌈vpls·(1 − ρ_S)⌉ paths are shot; at most 4× are kept) |
 //! | `interleave` | 4 | n of `igi`'s n×n interleaved sampling |
 //! | `caching_radius` | 0.05 | a, in units of the scene's bounding diagonal |
-//! | `normal_tolerance` | 20 | θ, degrees a normal may turn before a record stops serving it (the paper's eq. 5 ties it to a: acos(1 − a²), 4.05°) |
+//! | `normal_tolerance` | 40 | θ, degrees a normal may turn before a record stops serving it (the paper's eq. 5 ties it to a: acos(1 − a²), 4.05°) |
 //! | `clamp_distance` | 0.01 | min_d of G′'s clamp, in units of the scene's bounding diagonal |
 //! | `max_bounces` | none | bounces a VPL path may take; none: until Russian roulette ends it |
 //! | `spp` | 1 | camera samples per pixel per tick |
