@@ -403,7 +403,7 @@ fn bench_error_writes_its_files_and_reuses_cached_references() {
         "stage_times.png",
         "stage_times.svg",
         "errors/path_spp_2.png",
-        "errors/photon_reuse_naive.png",
+        "errors/photon_reuse_naive_paths_3000.png",
     ] {
         let p = out.join("report").join(file);
         assert!(std::fs::metadata(&p).is_ok_and(|m| m.len() > 0), "{} missing", p.display());

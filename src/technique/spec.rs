@@ -58,53 +58,61 @@ impl TechniqueConfig {
         Ok(config)
     }
 
-    /// The spec that parses back to this configuration's id and mode (for labels and file names).
+    /// The spec that parses back to this configuration, `from_spec(&c.label()) == c` (for labels
+    /// and file names): the technique's usual head (`path:spp=1`, `photon_reuse:error@0.001`,
+    /// `instant_cache:temporal@256`), then `:KEY=VALUE` for every other field that differs from
+    /// the technique's defaults, in key order. Two configurations share a label only if equal.
     pub fn label(&self) -> String {
+        let (mut label, written) = self.label_head();
+        let fields = serde_json::to_value(self).ok();
+        let defaults = super::registry::default_config(self.id()).and_then(|d| serde_json::to_value(d).ok());
+        let (Some(Value::Object(fields)), Some(Value::Object(defaults))) = (fields, defaults) else { return label };
+        for (key, value) in &fields {
+            if key != "id" && !written.contains(&key.as_str()) && defaults.get(key) != Some(value) {
+                label.push_str(&format!(":{key}={}", spec_value(value)));
+            }
+        }
+        label
+    }
+
+    /// The head of [`TechniqueConfig::label`] and the fields it states.
+    fn label_head(&self) -> (String, &'static [&'static str]) {
         match self {
-            TechniqueConfig::Path(c) => format!("path:spp={}", c.spp),
+            TechniqueConfig::Path(c) => (format!("path:spp={}", c.spp), &["spp"]),
             TechniqueConfig::InstantCache(c) => {
                 let mode = serde_json::to_value(c.mode).ok().and_then(|v| v.as_str().map(str::to_string));
-                let on_demand = c.reevaluation == super::instant_cache::Reevaluation::OnDemand;
-                let theta = c.normal_tolerance;
-                let refine = c.refine_ticks;
-                format!(
-                    "instant_cache:{}@{}{}{}{}",
-                    mode.unwrap_or_default(),
-                    c.vpls,
-                    if on_demand { ":reevaluation=on_demand" } else { "" },
-                    if theta == super::instant_cache::DEFAULT_NORMAL_TOLERANCE {
-                        String::new()
-                    } else {
-                        format!(":normal_tolerance={theta}")
-                    },
-                    if refine == super::instant_cache::DEFAULT_REFINE_TICKS {
-                        String::new()
-                    } else {
-                        format!(":refine_ticks={refine}")
-                    }
-                )
+                (format!("instant_cache:{}@{}", mode.unwrap_or_default(), c.vpls), &["mode", "vpls"])
             }
-            TechniqueConfig::ParticleGi(c) => match c.particles {
-                Some(n) => format!("particle_gi:particles={n}"),
-                None => "particle_gi".into(),
-            },
-            TechniqueConfig::Bdpt(c) => format!(
-                "bdpt:spp={}{}{}{}",
-                c.spp,
-                if c.light_per_eye_path { ":light_per_eye_path=true" } else { "" },
-                if c.permute { "" } else { ":permute=false" },
-                if c.light_tracing_only { ":light_tracing_only=true" } else { "" }
-            ),
+            TechniqueConfig::ParticleGi(_) => ("particle_gi".into(), &[]),
+            TechniqueConfig::Bdpt(c) => (format!("bdpt:spp={}", c.spp), &["spp"]),
             TechniqueConfig::PhotonReuse(c) => {
                 let mode = serde_json::to_value(c.reuse).ok().and_then(|v| v.as_str().map(str::to_string));
                 let mode = mode.unwrap_or_default();
                 if c.reuse == super::photon_reuse::ReuseMode::Error {
-                    format!("photon_reuse:{mode}@{}", c.threshold)
+                    (format!("photon_reuse:{mode}@{}", c.threshold), &["reuse", "threshold"])
                 } else {
-                    format!("photon_reuse:{mode}")
+                    (format!("photon_reuse:{mode}"), &["reuse"])
                 }
             }
         }
+    }
+}
+
+/// A field's value as a spec writes it: strings bare, numbers that are `f32`s in their
+/// shortest form (`0.07`, not the `f64` widening's `0.07000000029802322`), the rest as JSON.
+fn spec_value(value: &Value) -> String {
+    match value {
+        Value::String(s) => s.clone(),
+        Value::Number(n) if n.is_f64() => {
+            let wide = n.as_f64().unwrap_or(f64::NAN);
+            let narrow = wide as f32;
+            if f64::from(narrow) == wide {
+                narrow.to_string()
+            } else {
+                wide.to_string()
+            }
+        }
+        other => other.to_string(),
     }
 }
 
@@ -112,16 +120,72 @@ impl TechniqueConfig {
 mod tests {
     use super::*;
     use crate::technique::photon_reuse::ReuseMode;
+    use crate::technique::registry::{Parameter, ParameterKind};
 
     #[test]
     fn specs_parse_into_the_service_configuration() {
         let c = TechniqueConfig::from_spec("photon_reuse:error@0.01:paths=2000").unwrap();
         let TechniqueConfig::PhotonReuse(p) = &c else { panic!("{c:?}") };
         assert_eq!((p.reuse, p.threshold, p.paths), (ReuseMode::Error, 0.01, 2000));
-        assert_eq!(c.label(), "photon_reuse:error@0.01");
+        assert_eq!(c.label(), "photon_reuse:error@0.01:paths=2000");
         let c = TechniqueConfig::from_spec("path:spp=4").unwrap();
         assert_eq!(c, serde_json::from_str(r#"{"id": "path", "spp": 4}"#).unwrap());
         assert_eq!(TechniqueConfig::from_spec("photon_reuse:naive").unwrap().label(), "photon_reuse:naive");
+    }
+
+    /// Specs of a configuration with `parameter` set to a value other than its default.
+    fn specs_off_default(id: &str, parameter: &Parameter, default: &Value) -> Vec<String> {
+        let name = parameter.name;
+        match parameter.kind {
+            ParameterKind::Integer { min, max } => {
+                let v = if default.as_u64() == Some(max) { min } else { max };
+                vec![format!("{id}:{name}={v}")]
+            }
+            ParameterKind::Number { min, max } => {
+                let quarter = min + 0.25 * (max - min);
+                let v = if default.as_f64() == Some(quarter) { min + 0.75 * (max - min) } else { quarter };
+                vec![format!("{id}:{name}={v}")]
+            }
+            ParameterKind::Choice { choices } => choices.iter().map(|c| format!("{id}:{name}={c}")).collect(),
+            ParameterKind::Boolean => vec![format!("{id}:{name}={}", !default.as_bool().unwrap_or(false))],
+        }
+    }
+
+    #[test]
+    fn labels_parse_back_to_their_configuration() {
+        // Property: a configuration's label is a spec that parses back to it, so configurations
+        // that differ in any field have different labels (`bench error` groups its results and
+        // names its files by label). Configurations: each technique's defaults, its test specs,
+        // and each of its registry parameters set off its default, alone and all together.
+        // Negative control, by hand: labels of the head alone (without the `:KEY=VALUE` of the
+        // other fields) fail, first on `path:regeneration=false`.
+        let mut labels = std::collections::HashMap::new();
+        for d in crate::technique::registry::REGISTRY {
+            let defaults = serde_json::to_value(crate::technique::registry::default_config(d.id).unwrap()).unwrap();
+            let mut specs: Vec<String> = vec![d.id.to_string()];
+            specs.extend(d.test_specs.iter().map(|s| s.to_string()));
+            for p in d.parameters {
+                specs.extend(specs_off_default(d.id, p, &defaults[p.name]));
+            }
+            let all_off: Vec<String> =
+                d.parameters.iter().filter_map(|p| specs_off_default(d.id, p, &defaults[p.name]).pop()).collect();
+            specs.push(
+                std::iter::once(d.id.to_string())
+                    .chain(all_off.iter().map(|s| s.split_once(':').unwrap().1.to_string()))
+                    .collect::<Vec<_>>()
+                    .join(":"),
+            );
+            for spec in specs {
+                let config = TechniqueConfig::from_spec(&spec).unwrap_or_else(|e| panic!("{spec}: {e}"));
+                let label = config.label();
+                let back = TechniqueConfig::from_spec(&label).unwrap_or_else(|e| panic!("{spec} -> {label}: {e}"));
+                assert_eq!(back, config, "{spec}: its label {label} parses to another configuration");
+                if let Some(other) = labels.insert(label.clone(), config.clone()) {
+                    assert_eq!(other, config, "{label} labels two configurations");
+                }
+            }
+        }
+        assert!(labels.len() > 20, "only {} distinct configurations were checked", labels.len());
     }
 
     #[test]

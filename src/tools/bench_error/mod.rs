@@ -118,14 +118,27 @@ impl BenchConfig {
     }
 }
 
-/// The specs of `--techniques`, each followed by its denoised twin when `--denoise` asks.
+/// The specs of `--techniques`, each followed by its denoised twin when `--denoise` asks (unless
+/// a spec names that twin itself). Results are grouped by label, so a spec that repeats an
+/// earlier configuration is refused.
 fn bench_configs(techniques: &str, denoise: Option<&str>) -> Result<Vec<BenchConfig>, UsageError> {
     let twin = super::denoise_settings(denoise)?;
+    let mut given = Vec::new();
+    let mut labels = std::collections::HashSet::new();
+    for spec in techniques.split(',').map(str::trim) {
+        let config = BenchConfig::parse(spec)?;
+        let label = config.label();
+        if !labels.insert(label.clone()) {
+            return Err(UsageError(format!("--techniques: '{spec}' repeats an earlier configuration ({label})")));
+        }
+        given.push(config);
+    }
     let mut out = Vec::new();
-    for spec in techniques.split(',') {
-        let config = BenchConfig::parse(spec.trim())?;
-        let denoised =
-            twin.filter(|_| config.denoise.is_none()).map(|d| BenchConfig { denoise: Some(d), ..config.clone() });
+    for config in given {
+        let denoised = twin
+            .filter(|_| config.denoise.is_none())
+            .map(|d| BenchConfig { denoise: Some(d), ..config.clone() })
+            .filter(|t| !labels.contains(&t.label()));
         out.push(config);
         out.extend(denoised);
     }
@@ -397,5 +410,21 @@ mod tests {
         assert_eq!(all[0].denoise, None);
         assert_eq!(all[1].denoise, Some(DenoiseSettings::default()));
         assert_eq!(all[2].denoise.map(|d| d.quality), Some(DenoiseQuality::Fast));
+        // A spec naming a twin itself gets no second one.
+        let named = bench_configs("path,path+oidn", Some("high")).expect("specs");
+        assert_eq!(named.iter().map(BenchConfig::label).collect::<Vec<_>>(), ["path:spp=1", "path:spp=1+oidn"]);
+    }
+
+    #[test]
+    fn a_repeated_configuration_is_refused_and_distinct_ones_are_not() {
+        // `path` and `path:spp=1` are one configuration (spp defaults to 1); configurations that
+        // differ only in a field outside the label's head are two (their results were merged
+        // under one label before labels carried every field).
+        let e = bench_configs("path,path:spp=1", None).expect_err("a repeat");
+        assert!(e.to_string().contains("'path:spp=1' repeats an earlier configuration"), "{e}");
+        let radii = "instant_cache,instant_cache:caching_radius=0.07,instant_cache:caching_radius=0.1";
+        let all = bench_configs(radii, None).expect("three configurations");
+        let labels: std::collections::HashSet<String> = all.iter().map(BenchConfig::label).collect();
+        assert_eq!(labels.len(), 3, "{labels:?}");
     }
 }
