@@ -62,6 +62,7 @@ impl TechniqueConfig {
     /// and file names): the technique's usual head (`path:spp=1`, `photon_reuse:error@0.001`,
     /// `instant_cache:temporal@256`), then `:KEY=VALUE` for every other field that differs from
     /// the technique's defaults, in key order. Two configurations share a label only if equal.
+    /// (A nested object, `path`'s `preview_filter`, is written as JSON: no spec can set one.)
     pub fn label(&self) -> String {
         let (mut label, written) = self.label_head();
         let fields = serde_json::to_value(self).ok();
