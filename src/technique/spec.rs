@@ -81,14 +81,12 @@ impl TechniqueConfig {
         match self {
             TechniqueConfig::Path(c) => (format!("path:spp={}", c.spp), &["spp"]),
             TechniqueConfig::InstantCache(c) => {
-                let mode = serde_json::to_value(c.mode).ok().and_then(|v| v.as_str().map(str::to_string));
-                (format!("instant_cache:{}@{}", mode.unwrap_or_default(), c.vpls), &["mode", "vpls"])
+                (format!("instant_cache:{}@{}", variant_name(c.mode), c.vpls), &["mode", "vpls"])
             }
             TechniqueConfig::ParticleGi(_) => ("particle_gi".into(), &[]),
             TechniqueConfig::Bdpt(c) => (format!("bdpt:spp={}", c.spp), &["spp"]),
             TechniqueConfig::PhotonReuse(c) => {
-                let mode = serde_json::to_value(c.reuse).ok().and_then(|v| v.as_str().map(str::to_string));
-                let mode = mode.unwrap_or_default();
+                let mode = variant_name(c.reuse);
                 if c.reuse == super::photon_reuse::ReuseMode::Error {
                     (format!("photon_reuse:{mode}@{}", c.threshold), &["reuse", "threshold"])
                 } else {
@@ -97,6 +95,11 @@ impl TechniqueConfig {
             }
         }
     }
+}
+
+/// A unit enum variant's name as its JSON has it (`temporal`, `error`).
+fn variant_name(variant: impl serde::Serialize) -> String {
+    serde_json::to_value(variant).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default()
 }
 
 /// A field's value as a spec writes it: strings bare, numbers that are `f32`s in their
