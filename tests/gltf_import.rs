@@ -35,6 +35,49 @@ fn nested_node_transforms_compose_into_world_positions() {
 }
 
 #[test]
+fn vertex_normals_turn_with_their_node_and_survive_export() {
+    // Property: NORMAL is read; the shading normal is the file's normal under the inverse
+    // transpose of the node's world matrix, whether that stays a transform (a non-uniform
+    // scale) or is baked into the vertices (a rotation under a non-uniform scale, which has
+    // shear); export writes NORMAL back, and its import gives the same shading normals.
+    // Negative control: the world matrix itself (no inverse transpose) turns the normal
+    // elsewhere for both nodes.
+    let mut doc = Doc::default();
+    let n = Vec3::new(0.6, 0.0, 0.8);
+    let p = doc.floats(&[0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0], "VEC3");
+    let normals = doc.floats(&[n.to_array(); 3].concat(), "VEC3");
+    let mesh = json!({"primitives": [{"attributes": {"POSITION": p, "NORMAL": normals}}]});
+    let scale = Vec3::new(3.0, 1.0, 0.5);
+    let turn = Quat::from_rotation_y(0.7);
+    let bytes = doc.finish(json!({
+        "scene": 0, "scenes": [{"nodes": [0, 1]}], "meshes": [mesh],
+        "nodes": [
+            {"name": "scaled", "mesh": 0, "scale": scale.to_array()},
+            {"name": "skewed", "scale": scale.to_array(), "children": [2]},
+            {"name": "turned", "mesh": 0, "rotation": turn.to_array()},
+        ],
+    }));
+    let imported = import(&bytes).expect("import");
+    assert!(!imported.warnings.iter().any(|w| w.contains("normal")), "{:?}", imported.warnings);
+    let worlds = [("scaled", Mat4::from_scale(scale)), ("turned", Mat4::from_scale(scale) * Mat4::from_quat(turn))];
+    let check = |scene: &relume::scene::Scene, what: &str| {
+        for (name, world) in worlds {
+            let i = scene.object_index(name).unwrap_or_else(|| panic!("no object {name}"));
+            let sp = scene.surface_point(relume::scene::SurfaceId::Object(i as u32), 0, 0.2, 0.3);
+            let m = glam::Mat3::from_mat4(world);
+            let side = |v: Vec3| if v.dot(sp.n) < 0.0 { -v } else { v };
+            let expected = side((m.inverse().transpose() * n).normalize());
+            assert!(close(sp.ns, expected, 1e-5), "{what} {name}: {} vs {expected}", sp.ns);
+            assert!(!close(sp.ns, side((m * n).normalize()), 1e-2), "{what} {name}: negative control");
+        }
+    };
+    let scene = build(&imported);
+    check(&scene, "imported");
+    let again = import(&export_glb(&scene, &[]).expect("export")).expect("re-import");
+    check(&build(&again), "exported and imported again");
+}
+
+#[test]
 fn every_material_mapping_reads_as_documented() {
     let imported = import(&materials_doc()).expect("import");
     let m = &imported.desc.materials;

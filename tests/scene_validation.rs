@@ -14,6 +14,11 @@ fn root(tag: &str) -> PathBuf {
     .unwrap();
     std::fs::write(dir.join("meshes/flat.obj"), "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n").unwrap();
     std::fs::write(dir.join("meshes/nan.obj"), "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(
+        dir.join("meshes/nan-normal.obj"),
+        "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nvn 0 nan 1\nf 1//1 2//2 3//1\n",
+    )
+    .unwrap();
     std::fs::create_dir_all(dir.parent().unwrap().join("outside-relume")).ok();
     dir
 }
@@ -73,6 +78,32 @@ fn infinite_numbers_are_rejected_by_field() {
 fn nan_in_an_obj_names_the_vertex() {
     let r = load_with("nan", |v| v["objects"][0]["shape"]["path"] = "meshes/nan.obj".into());
     expect_error(r, "objects[0].shape.path", "vertex 2");
+}
+
+#[test]
+fn bad_vertex_normals_name_the_vertex_or_the_field() {
+    let r = load_with("nan-normal", |v| v["objects"][0]["shape"]["path"] = "meshes/nan-normal.obj".into());
+    expect_error(r, "objects[0].shape.path", "normal of vertex 2");
+    let triangles = |normals: serde_json::Value| {
+        move |v: &mut serde_json::Value| {
+            v["objects"][0]["shape"] = serde_json::json!({
+                "type": "triangles", "positions": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "indices": [[0, 1, 2]],
+                "normals": normals,
+            })
+        }
+    };
+    let r = load_with("normal-count", triangles(serde_json::json!([[0, 0, 1], [0, 0, 1]])));
+    expect_error(r, "objects[0].shape.normals", "2 normals for 3 positions");
+    let text = serde_json::to_string(&{
+        let mut v: serde_json::Value = serde_json::from_str(BASE).unwrap();
+        triangles(serde_json::json!([[0, 0, 1], [0, 0, 1], [0, 7, 1]]))(&mut v);
+        v
+    })
+    .unwrap()
+    .replace("[0,7,1]", "[0,1e39,1]");
+    expect_error(load_text("normal-inf", &text), "objects[0].shape.normals[2][1]", "not a finite number");
+    // A zero normal loads (a file's degenerate `vn`): it adds nothing where it is interpolated.
+    assert!(load_with("normal-zero", triangles(serde_json::json!([[0, 0, 0], [0, 0, 1], [0, 0, 1]]))).is_ok());
 }
 
 #[test]

@@ -122,9 +122,10 @@ impl DenoiseStage {
                 let jitter = rng.next_2d();
                 let s = camera_chain::trace(scene, accel, i, jitter, &mut rng);
                 let sample = match &s.hit {
-                    Some(hit) => {
-                        AuxSample { albedo: hit.beta * hit.material(scene).diffuse_reflectance(), normal: hit.facing() }
-                    }
+                    Some(hit) => AuxSample {
+                        albedo: hit.beta * hit.material(scene).diffuse_reflectance(),
+                        normal: hit.shading_facing(),
+                    },
                     None if s.emitted != Rgb::BLACK => AuxSample { albedo: Rgb::WHITE, normal: Vec3::ZERO },
                     None => AuxSample::default(),
                 };

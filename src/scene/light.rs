@@ -91,7 +91,7 @@ pub fn emitter_mesh(emitter: &EmitterDesc) -> Option<Mesh> {
         EmitterDesc::Rect { .. } => Some(Mesh::quad()),
         EmitterDesc::Disc { segments, .. } => Some(Mesh::disc(*segments)),
         EmitterDesc::Mesh { positions, indices, .. } => {
-            let mut mesh = Mesh::from_inline(positions, indices).ok()?;
+            let mut mesh = Mesh::from_inline(positions, indices, None).ok()?;
             mesh.drop_degenerate();
             Some(mesh)
         }

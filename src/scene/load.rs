@@ -300,7 +300,7 @@ pub fn validate_emitter(field: &str, e: &EmitterDesc) -> Result<(), SceneError> 
         }
         EmitterDesc::Mesh { radiance, positions, indices } => {
             check_emission(&format!("{field}.radiance"), *radiance)?;
-            let mut mesh = inline_mesh(field, positions, indices)?;
+            let mut mesh = inline_mesh(field, positions, indices, None)?;
             mesh.drop_degenerate();
             if mesh.triangles.is_empty() {
                 return Err(invalid(format!("{field}.indices"), "no non-degenerate triangles"));
@@ -311,8 +311,13 @@ pub fn validate_emitter(field: &str, e: &EmitterDesc) -> Result<(), SceneError> 
 }
 
 /// An inline triangle list as a mesh; errors name the field under `field`.
-pub fn inline_mesh(field: &str, positions: &[[f32; 3]], indices: &[[u32; 3]]) -> Result<Mesh, SceneError> {
-    Mesh::from_inline(positions, indices).map_err(|(at, message)| invalid(format!("{field}.{at}"), message))
+pub fn inline_mesh(
+    field: &str,
+    positions: &[[f32; 3]],
+    indices: &[[u32; 3]],
+    normals: Option<&[[f32; 3]]>,
+) -> Result<Mesh, SceneError> {
+    Mesh::from_inline(positions, indices, normals).map_err(|(at, message)| invalid(format!("{field}.{at}"), message))
 }
 
 fn check_segments(field: &str, s: u32) -> Result<(), SceneError> {
@@ -436,7 +441,9 @@ pub fn validate_and_build_meshes(
                 check_segments(&format!("{shape_field}.segments"), *segments)?;
                 Mesh::cylinder(*segments)
             }
-            ShapeDesc::Triangles { positions, indices } => inline_mesh(&shape_field, positions, indices)?,
+            ShapeDesc::Triangles { positions, indices, normals } => {
+                inline_mesh(&shape_field, positions, indices, normals.as_deref())?
+            }
         };
         let n = mesh.drop_degenerate();
         if n > 0 {

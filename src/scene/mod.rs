@@ -4,7 +4,9 @@
 //! Units: meters (the Cornell box keeps its published millimetre numbers as scene units: radiance
 //! is scale-invariant), radians, linear Rec.709. Invariants: everything in a `Scene` passed
 //! `load::validate_*`; each object's `world_positions` equal its mesh under `world_from_object`,
-//! and its `hit_triangles` are those positions gathered per triangle with the winding's normal.
+//! its `hit_triangles` are those positions gathered per triangle with the winding's normal, and
+//! its `shading_normals` are its mesh's vertex normals under the inverse transpose (empty when
+//! the mesh has none). A surface point's shading normal lies on its geometric normal's side.
 pub mod accel;
 pub mod animation;
 pub mod camera;
@@ -20,6 +22,7 @@ pub use accel::SceneAccel;
 pub use camera::Camera;
 pub use light::{IncidentSample, LightGeometry};
 pub use load::{SceneBudget, SceneError};
+pub use material::{Normals, Transport};
 pub use model::{CameraDesc, EmitterDesc, LightDesc, Material, ObjectDesc, SceneDesc, ShapeDesc, Trs};
 pub use shapes::Mesh;
 
@@ -54,6 +57,9 @@ pub struct SceneObject {
     pub world_positions: Vec<Vec3>,
     /// Per triangle, what resolving a hit reads, in one cache line.
     pub hit_triangles: Vec<HitTriangle>,
+    /// Per triangle, its three world-space unit vertex normals; empty for a flat-shaded mesh,
+    /// so a scene without vertex normals pays nothing for them.
+    pub shading_normals: Vec<[Vec3; 3]>,
     /// World-space surface area (m²).
     pub area: f32,
     /// The bounds of `mesh` in object space: where a new transform would put it.
@@ -91,8 +97,17 @@ pub struct SurfacePoint {
     pub p: Vec3,
     /// Unit geometric normal from the triangle's winding, in world space.
     pub n: Vec3,
+    /// Unit shading normal, interpolated from the vertex normals and on the side of `n`; equal
+    /// to `n` on flat-shaded meshes and lights.
+    pub ns: Vec3,
     pub surface: SurfaceId,
     pub prim: u32,
+}
+
+impl SurfacePoint {
+    pub fn normals(&self) -> Normals {
+        Normals { geometric: self.n, shading: self.ns }
+    }
 }
 
 /// One triangle as a hit reads it: its world vertices and unit geometric normal, 64 bytes
@@ -118,6 +133,40 @@ fn hit_triangles(positions: &[Vec3], mesh: &Mesh) -> Vec<HitTriangle> {
 /// Unit normal of a triangle from its winding; zero for a degenerate one.
 fn unit_normal([a, b, c]: [Vec3; 3]) -> Vec3 {
     (b - a).cross(c - a).normalize_or_zero()
+}
+
+/// Each triangle's vertex normals in world space (the inverse transpose of `xf`), or none for a
+/// mesh without vertex normals.
+fn shading_normals(mesh: &Mesh, xf: &Affine3A) -> Vec<[Vec3; 3]> {
+    if mesh.normals.is_empty() {
+        return Vec::new();
+    }
+    let m = xf.matrix3.inverse().transpose();
+    let world: Vec<Vec3> = mesh.normals.iter().map(|n| (m * *n).normalize_or_zero()).collect();
+    mesh.triangles.iter().map(|t| t.map(|i| world[i as usize])).collect()
+}
+
+/// The shading normal at barycentrics (`u`, `v`) from vertex normals `ns`, turned to the side of
+/// the geometric normal `n`; `n` itself where the interpolation vanishes.
+fn interpolate_shading_normal(ns: &[Vec3; 3], n: Vec3, u: f32, v: f32) -> Vec3 {
+    let s = (ns[0] * (1.0 - u - v) + ns[1] * u + ns[2] * v).normalize_or_zero();
+    match s.dot(n) {
+        d if d > 0.0 => s,
+        d if d < 0.0 => -s,
+        _ => n,
+    }
+}
+
+/// The barycentrics (u, v) of `p` projected onto triangle `[a, b, c]` (weights of `b` and `c`).
+fn barycentrics([a, b, c]: &[Vec3; 3], p: Vec3) -> (f32, f32) {
+    let (e1, e2, d) = (*b - *a, *c - *a, p - *a);
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d1, d2) = (d.dot(e1), d.dot(e2));
+    let det = d11 * d22 - d12 * d12;
+    if det <= 0.0 {
+        return (0.0, 0.0);
+    }
+    ((d22 * d1 - d12 * d2) / det, (d11 * d2 - d12 * d1) / det)
 }
 
 fn world_positions(mesh: &Mesh, xf: &Affine3A) -> Vec<Vec3> {
@@ -186,6 +235,7 @@ impl Scene {
                 let world = world_positions(&mesh, &xf);
                 let area = mesh_area(&world, &mesh);
                 let hit_triangles = hit_triangles(&world, &mesh);
+                let shading_normals = shading_normals(&mesh, &xf);
                 let material = material_names.iter().position(|n| *n == o.material).unwrap_or(0) as u32;
                 SceneObject {
                     name: o.name.clone(),
@@ -196,6 +246,7 @@ impl Scene {
                     dynamic: o.dynamic,
                     world_positions: world,
                     hit_triangles,
+                    shading_normals,
                     area,
                 }
             })
@@ -251,18 +302,33 @@ impl Scene {
     /// The world-space point and normal at barycentrics (`u`, `v`) of a triangle. Interpolating
     /// world vertices keeps the point's error bounded, as the robust ray offset assumes.
     pub fn surface_point(&self, surface: SurfaceId, prim: u32, u: f32, v: f32) -> SurfacePoint {
-        let ([a, b, c], n) = match surface {
+        let ([a, b, c], n, ns) = match surface {
             SurfaceId::Object(i) => {
-                let t = &self.objects[i as usize].hit_triangles[prim as usize];
-                (t.vertices, t.normal)
+                let o = &self.objects[i as usize];
+                let t = &o.hit_triangles[prim as usize];
+                let ns = match o.shading_normals.get(prim as usize) {
+                    Some(vertex_normals) => interpolate_shading_normal(vertex_normals, t.normal, u, v),
+                    None => t.normal,
+                };
+                (t.vertices, t.normal, ns)
             }
             SurfaceId::Light(_) => {
                 let t = self.triangle(surface, prim);
-                (t, unit_normal(t))
+                (t, unit_normal(t), unit_normal(t))
             }
         };
         let p = a * (1.0 - u - v) + b * u + c * v;
-        SurfacePoint { p, n, surface, prim }
+        SurfacePoint { p, n, ns, surface, prim }
+    }
+
+    /// Both normals at point `p` of an object's triangle (for what keeps positions but not
+    /// barycentrics, such as photons): flat ones unless the mesh has vertex normals.
+    pub fn normals_at(&self, object: u32, prim: u32, p: Vec3) -> Normals {
+        let o = &self.objects[object as usize];
+        let t = &o.hit_triangles[prim as usize];
+        let Some(vertex_normals) = o.shading_normals.get(prim as usize) else { return Normals::flat(t.normal) };
+        let (u, v) = barycentrics(&t.vertices, p);
+        Normals { geometric: t.normal, shading: interpolate_shading_normal(vertex_normals, t.normal, u, v) }
     }
 
     /// Unit geometric normal of a triangle, from its winding (zero for a light without one).
@@ -321,6 +387,7 @@ impl Scene {
         o.world_positions = world_positions(&o.mesh, &o.world_from_object);
         o.area = mesh_area(&o.world_positions, &o.mesh);
         o.hit_triangles = hit_triangles(&o.world_positions, &o.mesh);
+        o.shading_normals = shading_normals(&o.mesh, &o.world_from_object);
     }
 
     /// Replaces a light's transform and emitter (validated by the caller).

@@ -147,10 +147,13 @@ pub enum ShapeDesc {
         #[serde(default = "default_segments")]
         segments: u32,
     },
-    /// Triangles given inline (what glTF import makes of a mesh primitive).
+    /// Triangles given inline (what glTF import makes of a mesh primitive), with optional unit
+    /// vertex normals (one per position) that shade them smoothly.
     Triangles {
         positions: Positions,
         indices: Indices,
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        normals: Option<Positions>,
     },
 }
 

@@ -1,6 +1,10 @@
 //! Triangle meshes for every shape: tessellated primitives in their canonical object-space
 //! extents (see `model.rs`) and OBJ files loaded with `tobj`.
 //!
+//! A mesh may carry unit vertex normals (OBJ `vn`, glTF `NORMAL`, inline `normals`), which
+//! shade it smoothly (`Scene::surface_point`); primitives and meshes without them shade with
+//! flat triangle normals.
+//!
 //! Invariant: triangles are wound so that `(p1-p0)×(p2-p0)` points outward (for closed shapes) or
 //! towards +Z (for flat ones); glass and one-sided lights rely on it.
 use super::edits::Aabb;
@@ -13,6 +17,10 @@ use std::path::Path;
 pub struct Mesh {
     pub positions: Vec<Vec3>,
     pub triangles: Vec<[u32; 3]>,
+    /// One unit normal per position, or empty for flat shading. A zero normal (a file's
+    /// degenerate `vn`) adds nothing where it is interpolated; where all three of a triangle's
+    /// vanish, it shades flat.
+    pub normals: Vec<Vec3>,
 }
 
 impl Mesh {
@@ -38,14 +46,15 @@ impl Mesh {
         before - self.triangles.len()
     }
 
-    /// A mesh from inline positions and index triples; errors name the first non-finite
-    /// vertex or out-of-range index (`positions[3][1]`, `indices[7][2]`).
-    pub fn from_inline(positions: &[[f32; 3]], indices: &[[u32; 3]]) -> Result<Mesh, (String, String)> {
-        for (i, p) in positions.iter().enumerate() {
-            if let Some(k) = p.iter().position(|v| !v.is_finite()) {
-                return Err((format!("positions[{i}][{k}]"), format!("{} is not a finite number", p[k])));
-            }
-        }
+    /// A mesh from inline positions, index triples and optional vertex normals (one per
+    /// position); errors name the first non-finite value or out-of-range index
+    /// (`positions[3][1]`, `indices[7][2]`, `normals[2][0]`), or the `normals` count.
+    pub fn from_inline(
+        positions: &[[f32; 3]],
+        indices: &[[u32; 3]],
+        normals: Option<&[[f32; 3]]>,
+    ) -> Result<Mesh, (String, String)> {
+        check_finite("positions", positions)?;
         for (i, t) in indices.iter().enumerate() {
             if let Some(k) = t.iter().position(|&v| v as usize >= positions.len()) {
                 return Err((
@@ -54,7 +63,18 @@ impl Mesh {
                 ));
             }
         }
-        Ok(Mesh { positions: positions.iter().map(|&p| Vec3::from(p)).collect(), triangles: indices.to_vec() })
+        let normals = match normals {
+            Some(n) if n.len() != positions.len() => {
+                return Err(("normals".into(), format!("{} normals for {} positions", n.len(), positions.len())))
+            }
+            Some(n) => {
+                check_finite("normals", n)?;
+                n.iter().map(|&v| Vec3::from(v).normalize_or_zero()).collect()
+            }
+            None => Vec::new(),
+        };
+        let positions = positions.iter().map(|&p| Vec3::from(p)).collect();
+        Ok(Mesh { positions, triangles: indices.to_vec(), normals })
     }
 
     pub fn quad() -> Mesh {
@@ -66,6 +86,7 @@ impl Mesh {
                 Vec3::new(-1.0, 1.0, 0.0),
             ],
             triangles: vec![[0, 1, 2], [0, 2, 3]],
+            normals: Vec::new(),
         }
     }
 
@@ -122,7 +143,7 @@ impl Mesh {
     /// Unit disc in the XY plane facing +Z, as a fan of `segments` triangles.
     pub fn disc(segments: u32) -> Mesh {
         let segs = segments.max(3);
-        let mut m = Mesh { positions: vec![Vec3::ZERO], triangles: Vec::new() };
+        let mut m = Mesh { positions: vec![Vec3::ZERO], ..Mesh::default() };
         for i in 0..segs {
             let phi = 2.0 * PI * i as f32 / segs as f32;
             m.positions.push(Vec3::new(phi.cos(), phi.sin(), 0.0));
@@ -196,15 +217,29 @@ impl Mesh {
         }
     }
 
-    /// Loads every object of an OBJ file into one mesh (triangulated, positions only).
+    /// Loads every object of an OBJ file into one mesh (triangulated), with its vertex normals
+    /// when every object has them (`vn`; a file that gives some objects none shades flat).
     pub fn load_obj(path: &Path) -> Result<Mesh, String> {
         let options =
             tobj::LoadOptions { triangulate: true, single_index: true, ignore_points: true, ignore_lines: true };
         let (models, _) =
             tobj::load_obj(path, &options).map_err(|e| format!("cannot read OBJ {}: {e}", path.display()))?;
         let mut mesh = Mesh::default();
+        let smooth = models.iter().all(|m| m.mesh.normals.len() == m.mesh.positions.len());
         for model in models {
             let base = mesh.positions.len() as u32;
+            for (i, n) in model.mesh.normals.chunks_exact(3).enumerate().filter(|_| smooth) {
+                let n = Vec3::new(n[0], n[1], n[2]);
+                if !n.is_finite() {
+                    let name = &model.name;
+                    return Err(format!(
+                        "{}: normal of vertex {} of object '{name}' is not finite",
+                        path.display(),
+                        i + 1
+                    ));
+                }
+                mesh.normals.push(n.normalize_or_zero());
+            }
             let p = &model.mesh.positions;
             for (i, v) in p.chunks_exact(3).enumerate() {
                 let v = Vec3::new(v[0], v[1], v[2]);
@@ -224,6 +259,16 @@ impl Mesh {
         }
         Ok(mesh)
     }
+}
+
+/// The first non-finite component of `values`, named `{name}[i][k]`.
+fn check_finite(name: &str, values: &[[f32; 3]]) -> Result<(), (String, String)> {
+    for (i, p) in values.iter().enumerate() {
+        if let Some(k) = p.iter().position(|v| !v.is_finite()) {
+            return Err((format!("{name}[{i}][{k}]"), format!("{} is not a finite number", p[k])));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(test)]

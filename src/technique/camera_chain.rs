@@ -4,7 +4,7 @@
 //! reach them there); the chain gives up after [`MAX_SPECULAR_CHAIN`] specular bounces.
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::Ray;
-use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
+use crate::scene::{Material, Normals, Scene, SceneAccel, SurfaceId, Transport};
 use crate::technique::nee::sample_next_event;
 use glam::{Vec2, Vec3};
 
@@ -17,6 +17,8 @@ pub struct DiffuseHit {
     pub p: Vec3,
     /// Unit geometric normal.
     pub n: Vec3,
+    /// Unit shading normal (on the side of `n`; equal to it on flat-shaded meshes).
+    pub ns: Vec3,
     /// Unit direction back along the arriving ray.
     pub wo: Vec3,
     pub object: u32,
@@ -32,12 +34,25 @@ impl DiffuseHit {
         &scene.materials[scene.objects[self.object as usize].material as usize]
     }
 
-    /// The normal on the side the sample arrives from.
+    pub fn normals(&self) -> Normals {
+        Normals { geometric: self.n, shading: self.ns }
+    }
+
+    /// The geometric normal on the side the sample arrives from.
     pub fn facing(&self) -> Vec3 {
         if self.n.dot(self.wo) >= 0.0 {
             self.n
         } else {
             -self.n
+        }
+    }
+
+    /// The shading normal on the side the sample arrives from (the geometric normal's side).
+    pub fn shading_facing(&self) -> Vec3 {
+        if self.n.dot(self.wo) >= 0.0 {
+            self.ns
+        } else {
+            -self.ns
         }
     }
 }
@@ -80,11 +95,13 @@ pub fn trace(scene: &Scene, accel: &SceneAccel, index: usize, jitter: Vec2, rng:
         };
         let material = &scene.materials[scene.objects[object as usize].material as usize];
         if !material.is_specular() {
-            out.hit =
-                Some(DiffuseHit { p: sp.p, n: sp.n, wo, object, triangle: prim, uv: Vec2::new(hit.u, hit.v), beta });
+            let uv = Vec2::new(hit.u, hit.v);
+            out.hit = Some(DiffuseHit { p: sp.p, n: sp.n, ns: sp.ns, wo, object, triangle: prim, uv, beta });
             break;
         }
-        let Some(bs) = material.sample(sp.n, wo, rng.next_2d(), rng.next_f32()) else { break };
+        let Some(bs) = material.sample(sp.normals(), wo, rng.next_2d(), rng.next_f32(), Transport::Radiance) else {
+            break;
+        };
         beta *= bs.weight;
         let side = if sp.n.dot(bs.wi) >= 0.0 { sp.n } else { -sp.n };
         ray = Ray::new(offset_ray_origin(sp.p, side), bs.wi);
@@ -97,7 +114,7 @@ pub fn trace(scene: &Scene, accel: &SceneAccel, index: usize, jitter: Vec2, rng:
 /// traced.
 pub fn direct_light(scene: &Scene, accel: &SceneAccel, hit: &DiffuseHit, rng: &mut Rng) -> (Rgb, Option<Ray>) {
     let material = hit.material(scene);
-    match sample_next_event(scene, material, hit.p, hit.n, hit.wo, rng, false) {
+    match sample_next_event(scene, material, hit.p, hit.normals(), hit.wo, rng, false) {
         Some(ne) if !accel.scene().occluded1(&ne.shadow) => (hit.beta * ne.contribution, Some(ne.shadow)),
         Some(ne) => (Rgb::BLACK, Some(ne.shadow)),
         None => (Rgb::BLACK, None),

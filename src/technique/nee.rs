@@ -3,7 +3,7 @@
 use crate::core::sampling::power_heuristic;
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::Ray;
-use crate::scene::{Material, Scene};
+use crate::scene::{Material, Normals, Scene, Transport};
 use glam::Vec3;
 
 /// Relative shortening of shadow rays so they stop just before the sampled light point.
@@ -31,7 +31,7 @@ pub struct NextEvent {
     pub light_normal: Vec3,
 }
 
-/// Samples direct light at `p` (unit geometric normal `n`, outgoing `wo`) on a non-specular
+/// Samples direct light at `p` (with `normals`, outgoing `wo`) on a non-specular
 /// material. With `mis_with_bsdf`, area-light samples carry the power-heuristic weight against
 /// BSDF sampling (the caller must then also count BSDF-sampled emission hits with the matching
 /// weight); without it the estimate stands alone. Consumes three random numbers.
@@ -39,18 +39,19 @@ pub fn sample_next_event(
     scene: &Scene,
     material: &Material,
     p: Vec3,
-    n: Vec3,
+    normals: Normals,
     wo: Vec3,
     rng: &mut Rng,
     mis_with_bsdf: bool,
 ) -> Option<NextEvent> {
+    let n = normals.geometric;
     let select = scene.light_selection.as_ref()?;
     let (li, pmf, _) = select.sample(rng.next_f32());
     let u = rng.next_2d();
     let side = if n.dot(wo) >= 0.0 { n } else { -n };
     let origin = offset_ray_origin(p, side);
     let s = scene.lights[li].geometry.sample_incident(origin, u)?;
-    let f = material.eval(n, wo, s.wi);
+    let f = material.eval(normals, wo, s.wi, Transport::Radiance);
     if f.is_black() || s.pdf <= 0.0 {
         return None;
     }

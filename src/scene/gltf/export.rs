@@ -75,7 +75,13 @@ impl Bin {
         let positions: Vec<f32> = mesh.positions.iter().flat_map(|p| p.to_array()).collect();
         let position = self.floats(&positions, 3, "VEC3", Some(ARRAY_BUFFER));
         let indices = self.indices(&mesh.triangles);
-        json!({"primitives": [{"attributes": {"POSITION": position}, "indices": indices, "material": material}]})
+        let mut attributes = json!({"POSITION": position});
+        // glTF requires unit normals: a mesh with a zero one (a degenerate `vn`) is written flat.
+        if !mesh.normals.is_empty() && mesh.normals.iter().all(|n| *n != glam::Vec3::ZERO) {
+            let normals: Vec<f32> = mesh.normals.iter().flat_map(|n| n.to_array()).collect();
+            attributes["NORMAL"] = json!(self.floats(&normals, 3, "VEC3", Some(ARRAY_BUFFER)));
+        }
+        json!({"primitives": [{"attributes": attributes, "indices": indices, "material": material}]})
     }
 }
 

@@ -36,7 +36,8 @@ pub fn camera_pose(world: &Mat4, focus: f32) -> ([f32; 3], [f32; 3], [f32; 3]) {
     (position.to_array(), (position + forward * focus).to_array(), up.to_array())
 }
 
-type Primitive = (Positions, Indices);
+/// A primitive's positions, triangles and vertex normals (`NORMAL`), if it has them.
+type Primitive = (Positions, Indices, Option<Positions>);
 
 pub struct Importer<'a> {
     buffers: &'a [Vec<u8>],
@@ -108,17 +109,20 @@ impl<'a> Importer<'a> {
     ) -> Result<(), SceneError> {
         let world = info.world;
         let mirrored = world.determinant() < 0.0;
-        let (positions, indices) = self.primitive(mesh, prim, mirrored)?;
+        let (positions, indices, normals) = self.primitive(mesh, prim, mirrored)?;
         self.count(indices.len() as u64)?;
         self.grow_bounds(label, &world, &positions)?;
-        let (transform, positions) = match decompose(&world) {
-            Some(trs) => (trs, positions),
+        let (transform, positions, normals) = match decompose(&world) {
+            Some(trs) => (trs, positions, normals),
             None if info.dynamic => return Err(invalid(
                 label,
                 "its world matrix has shear (a non-uniform scale under a rotation), which a moving object cannot have",
             )),
             None => {
-                (Trs::default(), positions.iter().map(|p| world.transform_point3((*p).into()).to_array()).collect())
+                let normal_matrix = glam::Mat3::from_mat4(world).inverse().transpose();
+                let normals = normals.map(|n| n.iter().map(|v| (normal_matrix * Vec3::from(*v)).to_array()).collect());
+                let positions = positions.iter().map(|p| world.transform_point3((*p).into()).to_array()).collect();
+                (Trs::default(), positions, normals)
             }
         };
         let material = prim.material();
@@ -137,7 +141,7 @@ impl<'a> Importer<'a> {
         let name = unique(&mut self.names, name);
         self.objects.push(ObjectDesc {
             name: name.clone(),
-            shape: ShapeDesc::Triangles { positions, indices },
+            shape: ShapeDesc::Triangles { positions, indices, normals },
             material,
             transform,
             dynamic: info.dynamic,
@@ -184,8 +188,9 @@ impl<'a> Importer<'a> {
         if mirrored {
             triangles.iter_mut().for_each(|t| t.swap(1, 2));
         }
-        crate::scene::load::inline_mesh(&field, &positions, &triangles)?;
-        let p: Primitive = (positions.into(), triangles.into());
+        let normals: Option<Vec<[f32; 3]>> = reader.read_normals().map(Iterator::collect);
+        crate::scene::load::inline_mesh(&field, &positions, &triangles, normals.as_deref())?;
+        let p: Primitive = (positions.into(), triangles.into(), normals.map(Into::into));
         self.primitives.insert(key, p.clone());
         Ok(p)
     }
@@ -194,7 +199,6 @@ impl<'a> Importer<'a> {
         use gltf::Semantic;
         for (semantic, _) in prim.attributes() {
             let message = match semantic {
-                Semantic::Normals => "vertex normals are not read; relume shades with flat triangle normals",
                 Semantic::Colors(_) => "vertex colours are not read",
                 Semantic::Joints(_) | Semantic::Weights(_) => "skinning attributes are not read",
                 _ => continue,

@@ -3,14 +3,14 @@
 //!
 //! What import reads, warns about, or refuses:
 //! - **Read:** the default scene's node hierarchy (TRS or T·R·S `matrix`), TRIANGLES
-//!   primitives (positions, indices), materials (see `materials.rs`), emissive primitives as
+//!   primitives (positions, indices, normals), materials (see `materials.rs`), emissive primitives as
 //!   `mesh` lights, `KHR_lights_punctual` point and spot lights (candela → W/sr by 1/683), the
 //!   first perspective camera or the one named, TRS animation channels in all three
 //!   interpolations (see `animation.rs`), `extras.relume` (`dynamic`, and a camera's
 //!   `resolution` and `focus_distance`), buffers from the GLB chunk, `data:` URIs and files
 //!   inside the scenes root.
 //! - **Warned (read in part):** textures (their factors are used), partial metalness, alpha
-//!   modes, partial transmission, out-of-range colours, vertex normals and colours, skins,
+//!   modes, partial transmission, out-of-range colours, vertex colours, skins,
 //!   morph targets, light `range`, CUBICSPLINE sampling, a missing camera or material.
 //! - **Refused (an error naming the part):** other primitive modes, matrices with shear, moving
 //!   nodes whose world transform gets shear, directional lights, orthographic cameras chosen by

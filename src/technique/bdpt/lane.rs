@@ -2,10 +2,10 @@
 //! extends the eye subpath by the vertex the packet hit and evaluates every strategy ending
 //! there, (0, t) when it is a light, (1, t) by sampling a light, and (s, t) for s ≥ 2 against
 //! the vertices of one light subpath of the batch, each weighted by the power heuristic.
-use super::vertex::{hit_vertex, material, mis_weight, scatter, CameraDensity, Transport, Vertex, VertexKind};
+use super::vertex::{hit_vertex, material, mis_weight, scatter, CameraDensity, Vertex, VertexKind};
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::{Hit, Ray};
-use crate::scene::{Scene, SceneAccel};
+use crate::scene::{Scene, SceneAccel, Transport};
 use crate::technique::nee::{sample_next_event, shadow_segment};
 use crate::technique::path::packets::{LanePath, ShadowTest};
 use glam::Vec3;
@@ -163,12 +163,13 @@ impl BdptLane {
         let scene = ctx.scene;
         let e = self.eye[self.eye.len() - 1];
         let Some(m) = material(scene, &e) else { return };
-        let Some(ne) = sample_next_event(scene, m, e.p, e.n, e.wo, &mut self.rng, false) else { return };
+        let Some(ne) = sample_next_event(scene, m, e.p, e.normals(), e.wo, &mut self.rng, false) else { return };
         let geometry = &scene.lights[ne.light].geometry;
         let sampled = Vertex {
             kind: VertexKind::Light(ne.light as u32),
             p: ne.light_point,
             n: ne.light_normal,
+            ns: ne.light_normal,
             wo: Vec3::ZERO,
             beta: Rgb::WHITE,
             pdf_fwd: ne.light_pmf * geometry.pdf_position(),
@@ -207,7 +208,8 @@ impl BdptLane {
             }
             let dist = dist2.sqrt();
             let dir = d / dist;
-            let f = me.eval(e.n, e.wo, dir) * ml.eval(l.n, l.wo, -dir);
+            let f = me.eval(e.normals(), e.wo, dir, Transport::Radiance)
+                * ml.eval(l.normals(), l.wo, -dir, Transport::Importance);
             if f.is_black() {
                 continue;
             }

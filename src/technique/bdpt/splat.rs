@@ -20,7 +20,7 @@
 use super::vertex::{material, mis_weight, CameraDensity, Vertex, VertexKind};
 use crate::core::{offset_ray_origin, Rgb};
 use crate::embree::Ray;
-use crate::scene::{Scene, SceneAccel};
+use crate::scene::{Scene, SceneAccel, Transport};
 use crate::technique::nee::shadow_segment;
 
 /// Occlusion rays per Embree call (its 8-wide packet kernel).
@@ -78,7 +78,7 @@ fn connect(scene: &Scene, camera: &CameraDensity, subpath: &[Vertex]) -> Option<
     let dir = to_camera / dist2.sqrt();
     let cos = v.n.dot(dir).abs();
     let through = match v.kind {
-        VertexKind::Surface(_) => v.beta * material(scene, v)?.eval(v.n, v.wo, dir),
+        VertexKind::Surface(_) => v.beta * material(scene, v)?.eval(v.normals(), v.wo, dir, Transport::Importance),
         VertexKind::Light(l) => {
             let geometry = &scene.lights[l as usize].geometry;
             if geometry.is_delta() || v.pdf_fwd <= 0.0 {

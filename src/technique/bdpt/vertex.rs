@@ -8,7 +8,7 @@
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::Ray;
 use crate::scene::camera::Camera;
-use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
+use crate::scene::{Material, Normals, Scene, SceneAccel, SurfaceId, Transport};
 use glam::Vec3;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -25,6 +25,8 @@ pub struct Vertex {
     pub p: Vec3,
     /// Unit geometric normal; zero for the camera and point and spot lights.
     pub n: Vec3,
+    /// Unit shading normal (equal to `n` except on smooth-shaded meshes).
+    pub ns: Vec3,
     /// Unit direction towards the previous vertex of its subpath (zero at the subpath's start).
     pub wo: Vec3,
     pub beta: Rgb,
@@ -33,12 +35,10 @@ pub struct Vertex {
     pub delta: bool,
 }
 
-/// Which way a subpath carries light: radiance for eye subpaths, importance for light ones
-/// (the refraction scaling 1/η² applies to radiance only).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Transport {
-    Radiance,
-    Importance,
+impl Vertex {
+    pub fn normals(&self) -> Normals {
+        Normals { geometric: self.n, shading: self.ns }
+    }
 }
 
 pub fn material<'a>(scene: &'a Scene, v: &Vertex) -> Option<&'a Material> {
@@ -105,6 +105,7 @@ impl CameraDensity<'_> {
             kind: VertexKind::Camera,
             p: self.camera.position,
             n: Vec3::ZERO,
+            ns: Vec3::ZERO,
             wo: Vec3::ZERO,
             beta: Rgb::WHITE,
             pdf_fwd: 1.0,
@@ -191,16 +192,13 @@ pub fn mis_weight(scene: &Scene, camera: &CameraDensity, eye: &[Vertex], light: 
     1.0 / (1.0 + sum)
 }
 
-/// A scattering step from surface vertex `v`: the next ray, the BSDF weight (with the 1/η²
-/// refraction scaling only for radiance), the solid-angle densities forward and reverse (zero
-/// for specular lobes), and whether it was specular. `None` when the BSDF gives nothing.
+/// A scattering step from surface vertex `v`: the next ray, the BSDF weight for radiance
+/// (eye subpaths) or importance (light subpaths), the solid-angle densities forward and reverse
+/// (zero for specular lobes), and whether it was specular. `None` when the BSDF gives nothing.
 pub fn scatter(scene: &Scene, v: &Vertex, transport: Transport, rng: &mut Rng) -> Option<(Ray, Rgb, f32, f32, bool)> {
     let m = material(scene, v)?;
-    let bs = m.sample(v.n, v.wo, rng.next_2d(), rng.next_f32())?;
-    let mut weight = bs.weight;
-    if transport == Transport::Importance && bs.eta != 1.0 {
-        weight *= bs.eta * bs.eta;
-    }
+    let bs = m.sample(v.normals(), v.wo, rng.next_2d(), rng.next_f32(), transport)?;
+    let weight = bs.weight;
     let (pdf_fwd, pdf_rev) = if bs.specular { (0.0, 0.0) } else { (bs.pdf, m.pdf(v.n, bs.wi, v.wo)) };
     let side = if v.n.dot(bs.wi) >= 0.0 { v.n } else { -v.n };
     Some((Ray::new(offset_ray_origin(v.p, side), bs.wi), weight, pdf_fwd, pdf_rev, bs.specular))
@@ -223,8 +221,8 @@ pub fn hit_vertex(
         SurfaceId::Object(o) => VertexKind::Surface(o),
         SurfaceId::Light(l) => VertexKind::Light(l),
     };
-    let mut v =
-        Vertex { kind, p: sp.p, n: sp.n, wo: -ray.dir.normalize(), beta, pdf_fwd: 0.0, pdf_rev: 0.0, delta: false };
+    let wo = -ray.dir.normalize();
+    let mut v = Vertex { kind, p: sp.p, n: sp.n, ns: sp.ns, wo, beta, pdf_fwd: 0.0, pdf_rev: 0.0, delta: false };
     v.pdf_fwd = to_area(pdf_dir, prev, &v);
     Some(v)
 }
@@ -245,6 +243,7 @@ pub fn light_subpath(scene: &Scene, accel: &SceneAccel, max_vertices: usize, rng
         kind: VertexKind::Light(l as u32),
         p: origin,
         n,
+        ns: n,
         wo: Vec3::ZERO,
         beta: weight / pmf,
         pdf_fwd: pmf * geometry.pdf_position(),

@@ -1,7 +1,8 @@
 //! The instant cache (Debattista et al. §3.1): irradiance records computed from the VPLs at a
 //! sparse set of points and interpolated elsewhere (eq. 4).
 //!
-//! A record holds its position, its normal (on the side it was seen from), its irradiance and,
+//! A record holds its position, its shading normal (on the side it was seen from; the geometric
+//! normal on flat-shaded meshes, and the irradiance is about it), its irradiance and,
 //! per VPL, that VPL's contribution packed as RGBE (4 bytes), so one VPL's visibility can later
 //! be re-evaluated alone. Weights follow eq. 5 without the harmonic mean distance, with the
 //! distance and the normal given their own tolerances (as Tabellion and Lamorlette do):

@@ -53,7 +53,7 @@ fn subset_irradiance(
     n2: usize,
     min_distance: f32,
 ) -> (Rgb, u64) {
-    let facing = hit.facing();
+    let facing = hit.shading_facing();
     let from = ray_origin(hit.p, facing);
     let (mut e, mut rays) = (Rgb::BLACK, 0);
     for vpl in vpls.iter().skip(subset).step_by(n2) {
@@ -86,7 +86,7 @@ fn filter(hits: &[Option<(DiffuseHit, f32)>], raw: &[Rgb], width: usize, n: usiz
                     }
                     let q = qy as usize * width + qx as usize;
                     let Some((other, other_depth)) = hits[q] else { continue };
-                    if other.facing().dot(hit.facing()) > SAME_SURFACE_COSINE
+                    if other.shading_facing().dot(hit.shading_facing()) > SAME_SURFACE_COSINE
                         && (other_depth - depth).abs() <= SAME_SURFACE_DEPTH * depth
                     {
                         sum += raw[q];

@@ -23,11 +23,11 @@ use glam::{Vec3, Vec3A};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-/// A sample's first diffuse hit as kept: position, facing normal, object.
+/// A sample's first diffuse hit as kept: position, facing shading normal, object.
 pub type HitKey = (Vec3, Vec3, u32);
 
 pub fn hit_key(sample: &CameraSample) -> Option<HitKey> {
-    sample.hit.as_ref().map(|h| (h.p, h.facing(), h.object))
+    sample.hit.as_ref().map(|h| (h.p, h.shading_facing(), h.object))
 }
 
 /// One camera sample's interpolation, kept for the next tick.

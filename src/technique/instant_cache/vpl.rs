@@ -10,10 +10,13 @@
 //! the same every tick. A VPL's `key`
 //! (path, bounce) stays the same until what it depends on changes, so visibility rays are
 //! matched across ticks by key. A VPL's `intensity` is Φ·ρ/π, the radiant intensity per unit
-//! cosine of the flux Φ it reflects diffusely; Φ is the light's power over the paths shot.
+//! cosine of the flux Φ it reflects diffusely; Φ is the light's power over the paths shot. On a
+//! smooth-shaded mesh it is also times the shading factor of the direction Φ arrived from
+//! (`Normals::diffuse_factor`), and its `normal` stays the geometric one, whose cosine the
+//! emission takes. Receivers take theirs about their shading normal.
 use crate::core::{offset_ray_origin, Rgb};
 use crate::embree::Ray;
-use crate::scene::{Scene, SceneAccel, SurfaceId};
+use crate::scene::{Scene, SceneAccel, SurfaceId, Transport};
 use glam::{Vec2, Vec3};
 use std::f32::consts::FRAC_1_PI;
 
@@ -161,7 +164,7 @@ fn shoot_path(
         let wo = -ray.dir;
         if !material.is_specular() {
             let facing = if sp.n.dot(wo) >= 0.0 { sp.n } else { -sp.n };
-            let intensity = power * material.diffuse_reflectance() * FRAC_1_PI;
+            let intensity = power * material.diffuse_reflectance() * (FRAC_1_PI * sp.normals().diffuse_factor(wo));
             let key = (index - 1) as u32 * MAX_VPL_BOUNCES + bounce as u32;
             shot.vpls.push(Vpl {
                 position: sp.p,
@@ -173,7 +176,7 @@ fn shoot_path(
             });
         }
         let [d0, d1, lobe, roulette] = bounce_samples(index, bounce);
-        let Some(bs) = material.sample(sp.n, wo, Vec2::new(d0, d1), lobe) else { break };
+        let Some(bs) = material.sample(sp.normals(), wo, Vec2::new(d0, d1), lobe, Transport::Importance) else { break };
         let q = bs.weight.max_component().min(1.0);
         if q <= 0.0 || roulette >= q {
             break;

@@ -17,6 +17,7 @@
 //! rest: the render then finds the view's estimates ready instead of missing them all.
 use super::lighting::Lighting;
 use super::links::{LinkSet, NON_DIFFUSE};
+use super::particles::AreaParticles;
 use super::radiance::{key_parts, EstimationLists, RadianceKey, Tessellation, OBJECT_SHIFT};
 use crate::core::Rgb;
 use rayon::prelude::*;
@@ -136,23 +137,25 @@ impl Estimates {
 }
 
 /// Ẽ per share for each particle in `needed` (dense, particle i's share g at
-/// `i * shares + g`, zero elsewhere).
-pub fn gather(links: &LinkSet, lighting: &Lighting, needed: &[u32], particles: usize) -> Vec<Rgb> {
+/// `i * shares + g`, zero elsewhere), each link's radiance weighted by its shading factor.
+pub fn gather(links: &LinkSet, lighting: &Lighting, needed: &[u32], particles: &AreaParticles) -> Vec<Rgb> {
     let (per, shares) = (links.per_particle(), lighting.shares);
     let values: Vec<Rgb> = needed
         .par_iter()
         .flat_map_iter(|&i| {
             let ends = links.ends_of(i as usize);
+            let factors: Vec<f32> = (0..ends.len()).map(|k| links.receive_factor(particles, i as usize, k)).collect();
             (0..shares).map(move |g| {
                 let sum = ends
                     .iter()
-                    .filter(|&&e| e < NON_DIFFUSE)
-                    .fold(Rgb::BLACK, |s, &e| s + lighting.radiance[e as usize * shares + g]);
+                    .zip(&factors)
+                    .filter(|(&e, _)| e < NON_DIFFUSE)
+                    .fold(Rgb::BLACK, |s, (&e, &f)| s + lighting.radiance[e as usize * shares + g] * f);
                 sum * (PI / per as f32)
             })
         })
         .collect();
-    let mut dense = vec![Rgb::BLACK; particles * shares];
+    let mut dense = vec![Rgb::BLACK; particles.len() * shares];
     for (&i, v) in needed.iter().zip(values.chunks_exact(shares)) {
         dense[i as usize * shares..(i as usize + 1) * shares].copy_from_slice(v);
     }

@@ -23,7 +23,7 @@ use super::links::{LinkSet, NON_DIFFUSE};
 use super::particles::AreaParticles;
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::Ray;
-use crate::scene::{Scene, SceneAccel};
+use crate::scene::{Normals, Scene, SceneAccel};
 use crate::technique::nee::SHADOW_EPSILON;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
@@ -137,12 +137,12 @@ fn emit_flux(inputs: &Inputs, direct: &mut [Rgb], redo: &[bool]) -> u64 {
         .par_chunks_mut(shares)
         .enumerate()
         .map(|(i, out)| {
-            let (p, n) = (inputs.particles.position[i], inputs.particles.normal[i]);
-            let origin = offset_ray_origin(p, n);
+            let normals = inputs.particles.normals(i);
+            let origin = offset_ray_origin(inputs.particles.position[i], normals.geometric);
             (0..shares).filter(|&g| redo[g]).for_each(|g| out[g] = Rgb::BLACK);
             let mut rays = 0u64;
             for &l in &lights {
-                let (irradiance, traced) = irradiance_from(inputs, l, i, origin, n);
+                let (irradiance, traced) = irradiance_from(inputs, l, i, origin, normals);
                 out[l % shares] += irradiance * inputs.particles.areas[i];
                 rays += traced;
             }
@@ -151,9 +151,10 @@ fn emit_flux(inputs: &Inputs, direct: &mut [Rgb], redo: &[bool]) -> u64 {
         .sum()
 }
 
-/// Irradiance from light `l` at particle `i` (seen from `origin` with normal `n`), and the
-/// rays traced.
-fn irradiance_from(inputs: &Inputs, l: usize, i: usize, origin: glam::Vec3, n: glam::Vec3) -> (Rgb, u64) {
+/// Irradiance from light `l` at particle `i` (seen from `origin` with `normals`), about its
+/// shading normal, and the rays traced.
+fn irradiance_from(inputs: &Inputs, l: usize, i: usize, origin: glam::Vec3, normals: Normals) -> (Rgb, u64) {
+    let n = normals.geometric;
     let light = &inputs.scene.lights[l];
     let mut rng = Rng::new(inputs.seed ^ 0x454D_4954 ^ ((l as u64) << 32), i as u64); // "EMIT"
     let count = if light.geometry.is_delta() { 1 } else { inputs.samples };
@@ -167,7 +168,7 @@ fn irradiance_from(inputs: &Inputs, l: usize, i: usize, origin: glam::Vec3, n: g
         rays += 1;
         let shadow = Ray { origin, dir: s.wi, tnear: 0.0, tfar: s.dist * (1.0 - SHADOW_EPSILON) };
         if !inputs.accel.scene().occluded1(&shadow) {
-            sum += s.li * (cos / s.pdf);
+            sum += s.li * (cos * normals.diffuse_factor(s.wi) / s.pdf);
         }
     }
     (sum / count as f32, rays)
@@ -204,7 +205,7 @@ fn scatter_flux(
                     packets[m] = rho[i] * direct[i * shares + g] / per as f32;
                 }
                 for k in 0..per {
-                    count += walk(inputs.bounces, inputs.seed, links, &rho, (i, k), &packets, &mut acc);
+                    count += walk(inputs, links, &rho, (i, k), &packets, &mut acc);
                 }
             }
             (acc, count)
@@ -221,16 +222,17 @@ fn scatter_flux(
 }
 
 /// One scattering link's walk from particle `i` through link `k`: deposits the packets,
-/// times the reflectances met, at each particle reached. Returns the deposits made.
+/// times the reflectances and shading factors met, at each particle reached. Returns the
+/// deposits made.
 fn walk(
-    bounces: u32,
-    seed: u64,
+    inputs: &Inputs,
     links: &LinkSet,
     rho: &[Rgb],
     (i, k): (usize, usize),
     packets: &[Rgb],
     acc: &mut [Rgb],
 ) -> u64 {
+    let (bounces, seed, particles) = (inputs.bounces, inputs.seed, inputs.particles);
     let per = links.per_particle();
     let width = packets.len();
     let mut at = links.ends_of(i)[k];
@@ -243,7 +245,7 @@ fn walk(
             acc[base + m] += throughput * *p;
         }
     };
-    let mut throughput = Rgb::new(1.0, 1.0, 1.0);
+    let mut throughput = Rgb::splat(links.deposit_factor(particles, i, k, at as usize));
     deposit(acc, at, throughput);
     let mut count = 1;
     let mut rng = Rng::new(seed ^ 0x5343_4154, (i * per + k) as u64); // "SCAT"
@@ -254,6 +256,7 @@ fn walk(
         if next >= NON_DIFFUSE || throughput.is_black() {
             break;
         }
+        throughput *= links.deposit_factor(particles, at as usize, pick, next as usize);
         deposit(acc, next, throughput);
         count += 1;
         at = next;

@@ -202,6 +202,26 @@ impl LinkSet {
         frame.to_world(cosine_hemisphere(u))
     }
 
+    /// The shading factor at particle `i` of light arriving back along its link `k` (1 unless
+    /// some object is smooth-shaded): what a gather through the link weighs its radiance by.
+    pub fn receive_factor(&self, particles: &AreaParticles, i: usize, k: usize) -> f32 {
+        if particles.shading.is_empty() {
+            return 1.0;
+        }
+        let d = self.direction(&ShadingFrame::from_normal(particles.normal[i]), i, k);
+        particles.normals(i).diffuse_factor(d)
+    }
+
+    /// The shading factor at `end` of flux arriving along link `k` of particle `i` (1 unless
+    /// some object is smooth-shaded): what a scattering deposit there is weighted by.
+    pub fn deposit_factor(&self, particles: &AreaParticles, i: usize, k: usize, end: usize) -> f32 {
+        if particles.shading.is_empty() {
+            return 1.0;
+        }
+        let d = self.direction(&ShadingFrame::from_normal(particles.normal[i]), i, k);
+        particles.normals(end).diffuse_factor(-d)
+    }
+
     fn ray(&self, particles: &AreaParticles, i: usize, k: usize) -> Ray {
         let frame = ShadingFrame::from_normal(particles.normal[i]);
         Ray::new(offset_ray_origin(particles.position[i], particles.normal[i]), self.direction(&frame, i, k))

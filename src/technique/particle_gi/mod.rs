@@ -58,6 +58,12 @@
 //! only (no caustics; light reaching a mirror is lost), and emission to a particle close to a
 //! light uses its centre's distance. Direct light is exact (shadow rays).
 //!
+//! # Smooth shading
+//! On smooth-shaded meshes a particle keeps its geometric normal (its side, its links' frame)
+//! and also its shading normal: flux it receives, from a light or along a link, is weighted by
+//! the shading factor of the direction it arrives from (`Normals::diffuse_factor`), and so is
+//! each gathering link's radiance. Flat scenes skip this.
+//!
 //! # Failure modes
 //! Thin features below the particle spacing get their neighbours' light; link ends and lists
 //! keep to one object and one side of its winding, so a mesh wound inconsistently loses

@@ -19,7 +19,7 @@
 //! Units: metres, m².
 use super::grid::ParticleGrid;
 use crate::core::{Rgb, Rng};
-use crate::scene::{Scene, SceneObject, SurfaceId};
+use crate::scene::{Normals, Scene, SceneObject, SurfaceId};
 use glam::{Vec2, Vec3};
 
 /// Area particles, structure of arrays; particles 2k and 2k + 1 share point k.
@@ -29,8 +29,11 @@ pub struct AreaParticles {
     pub triangle: Vec<u32>,
     pub barycentric: Vec<Vec2>,
     pub position: Vec<Vec3>,
-    /// Unit normal of the particle's side.
+    /// Unit geometric normal of the particle's side.
     pub normal: Vec<Vec3>,
+    /// Unit shading normal of the particle's side, where some object is smooth-shaded (empty
+    /// otherwise, so flat scenes pay nothing for it).
+    pub shading: Vec<Vec3>,
     /// ΔA_i (m²) per particle, and its share of its object's area (ΔA_i over the area).
     pub areas: Vec<f32>,
     cell: Vec<f64>,
@@ -213,6 +216,9 @@ impl AreaParticles {
         let first = self.position.len();
         self.position.resize(self.object.len(), Vec3::ZERO);
         self.normal.resize(self.object.len(), Vec3::ZERO);
+        if scene.objects.iter().any(|o| !o.shading_normals.is_empty()) {
+            self.shading.resize(self.object.len(), Vec3::ZERO);
+        }
         self.place(scene, first..self.object.len());
     }
 
@@ -220,10 +226,21 @@ impl AreaParticles {
     /// current placement.
     pub fn place(&mut self, scene: &Scene, range: std::ops::Range<usize>) {
         for i in range {
-            let (p, n) = pose(scene, self.object[i], self.triangle[i], self.barycentric[i]);
-            self.position[i] = p;
-            self.normal[i] = if i % 2 == 0 { n } else { -n };
+            let b = self.barycentric[i];
+            let sp = scene.surface_point(SurfaceId::Object(self.object[i]), self.triangle[i], b.x, b.y);
+            let side = if i % 2 == 0 { 1.0 } else { -1.0 };
+            self.position[i] = sp.p;
+            self.normal[i] = sp.n * side;
+            if let Some(s) = self.shading.get_mut(i) {
+                *s = sp.ns * side;
+            }
         }
+    }
+
+    /// Particle `i`'s normals (both flat unless some object is smooth-shaded).
+    pub fn normals(&self, i: usize) -> Normals {
+        let geometric = self.normal[i];
+        Normals { geometric, shading: self.shading.get(i).copied().unwrap_or(geometric) }
     }
 
     pub fn len(&self) -> usize {

@@ -163,7 +163,7 @@ impl ParticleGi {
         self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
-        let gathered = gather::gather(&g.gather, lighting, &wanted, g.particles.len());
+        let gathered = gather::gather(&g.gather, lighting, &wanted, &g.particles);
         self.pending.area_particles_gathered += wanted.len() as u64;
         self.pending.gathering_ms += t.elapsed().as_secs_f64() * 1e3;
 

@@ -5,7 +5,7 @@
 use super::packets::{LanePath, ShadowTest};
 use crate::core::{offset_ray_origin, sampling::power_heuristic, Rgb, Rng};
 use crate::embree::{Hit, Ray};
-use crate::scene::{Scene, SceneAccel, SurfaceId};
+use crate::scene::{Scene, SceneAccel, SurfaceId, Transport};
 use crate::technique::nee::sample_next_event;
 use glam::Vec3;
 
@@ -139,11 +139,12 @@ fn shade(lane: &mut PathLane, hit: Option<Hit>, scene: &Scene, accel: &SceneAcce
     }
     let material = &scene.materials[scene.objects[oi as usize].material as usize];
     let n = sp.n;
+    let normals = sp.normals();
 
     // Next-event estimation towards one light chosen by power.
     let mut shadow = None;
     if !material.is_specular() {
-        if let Some(ne) = sample_next_event(scene, material, sp.p, n, wo, &mut lane.rng, true) {
+        if let Some(ne) = sample_next_event(scene, material, sp.p, normals, wo, &mut lane.rng, true) {
             shadow = Some((ne.shadow, lane.beta * ne.contribution));
         }
     }
@@ -151,7 +152,7 @@ fn shade(lane: &mut PathLane, hit: Option<Hit>, scene: &Scene, accel: &SceneAcce
     // Continue the path by sampling the BSDF.
     let u = lane.rng.next_2d();
     let uc = lane.rng.next_f32();
-    let Some(bs) = material.sample(n, wo, u, uc) else {
+    let Some(bs) = material.sample(normals, wo, u, uc, Transport::Radiance) else {
         lane.path_done = true;
         return shadow;
     };

@@ -30,11 +30,11 @@
 //! changed, draws its roulette again there (a fresh tail). Keeping the old verdict would bias
 //! the estimate low: the path would go on with probability q_old·q_new instead of q_new.
 use super::store::PathStore;
-use super::trace::{leaving, path_origin, photon_at, put_photon, surface_normal, Photon, Retrace};
+use super::trace::{leaving, path_origin, photon_at, photon_normals, put_photon, surface_normal, Photon, Retrace};
 use super::verify::{Changes, Crossing, VerifyWork};
 use crate::core::{PackedDir, Rgb};
 use crate::embree::Ray;
-use crate::scene::{Material, Scene, SceneAccel, SurfaceId};
+use crate::scene::{Material, Scene, SceneAccel, SurfaceId, Transport};
 use glam::Vec3;
 
 /// A new end this close to the stored one (relative to the segment's length) is the same.
@@ -63,8 +63,8 @@ pub struct Checked {
 
 /// Energy reflected at photon `p` (lying on `material`) towards `out`, per unit arriving flux.
 fn reflected(scene: &Scene, material: &Material, p: &Photon, out: Vec3) -> Rgb {
-    let n = surface_normal(scene, p);
-    material.eval(n, -p.incoming, out) * n.dot(out).abs()
+    let normals = photon_normals(scene, p);
+    material.eval(normals, -p.incoming, out, Transport::Importance) * normals.geometric.dot(out).abs()
 }
 
 fn within(new: Rgb, old: Rgb, threshold: f32) -> bool {

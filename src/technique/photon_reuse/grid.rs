@@ -16,7 +16,7 @@
 //! Units: positions in meters, power in watts.
 use super::store::PathStore;
 use crate::core::Rgb;
-use crate::scene::{Material, Scene, SurfaceId};
+use crate::scene::{Material, Normals, Scene, Transport};
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -34,6 +34,9 @@ pub struct GridPhoton {
     /// Gathering needs only this: the Lambertian BRDF is constant on a side, and a query only
     /// accepts photons whose surface faces the way its own does (see [`PhotonGrid::radiance`]).
     pub facing: Vec3,
+    /// The photon's flux times its surface's shading factor for the direction it arrived from
+    /// (`Normals::diffuse_factor`, 1 on flat-shaded meshes), which is all that shading normals
+    /// change in a Lambertian density estimate.
     pub power: Rgb,
     /// `path · B + row`.
     pub(super) key: u32,
@@ -45,7 +48,7 @@ impl GridPhoton {
     /// else nothing. The estimate is Σ terms / (π r²); a gather and a splat share this.
     pub fn term(&self, material: &Material, p: Vec3, n: Vec3, wo: Vec3, n_side: Vec3, r2: f32) -> Option<Rgb> {
         ((self.position - p).length_squared() <= r2 && self.facing.dot(n_side) > FACING_COSINE)
-            .then(|| material.eval(n, wo, self.facing) * self.power)
+            .then(|| material.eval(Normals::flat(n), wo, self.facing, Transport::Radiance) * self.power)
     }
 }
 
@@ -204,12 +207,14 @@ fn photon_at(
     if !diffuse[object as usize] {
         return None;
     }
-    let n = scene.normal(SurfaceId::Object(object), prim);
+    let position = row.position[path];
+    let normals = scene.normals_at(object, prim, position);
+    let n = normals.geometric;
     let incoming = row.incoming[path].get();
     let photon = GridPhoton {
-        position: row.position[path],
+        position,
         facing: if n.dot(incoming) < 0.0 { n } else { -n },
-        power: row.power[path],
+        power: row.power[path] * normals.diffuse_factor(-incoming),
         key: (path * store.max_photons + row_index) as u32,
     };
     Some((cell_of(photon.position, inv_cell), photon))

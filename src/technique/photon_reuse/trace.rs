@@ -9,7 +9,7 @@ use super::distribution::EmissionFrame;
 use super::store::{PathStore, StoredPhoton};
 use crate::core::{offset_ray_origin, PackedDir, Rgb, Rng};
 use crate::embree::Ray;
-use crate::scene::{Scene, SceneAccel, SurfaceId};
+use crate::scene::{Normals, Scene, SceneAccel, SurfaceId, Transport};
 use glam::Vec3;
 
 /// Separates photon random streams from camera streams keyed by the same numbers.
@@ -173,7 +173,12 @@ impl Tracer<'_> {
                 let prev = photon_at(store, path, k as usize - 1);
                 let escape = store.escape[path].get();
                 let material = &scene.materials[scene.objects[prev.object as usize].material as usize];
-                let w = material.sampled_weight(surface_normal(scene, &prev), -prev.incoming, escape);
+                let w = material.sampled_weight(
+                    photon_normals(scene, &prev),
+                    -prev.incoming,
+                    escape,
+                    Transport::Importance,
+                );
                 let q = w.max_component().min(1.0);
                 if q <= 0.0 {
                     tail.from = k;
@@ -255,13 +260,19 @@ pub fn surface_normal(scene: &Scene, p: &Photon) -> Vec3 {
     scene.normal(SurfaceId::Object(p.object), p.prim)
 }
 
+/// Both normals where a photon lies.
+pub fn photon_normals(scene: &Scene, p: &Photon) -> Normals {
+    scene.normals_at(p.object, p.prim, p.position)
+}
+
 /// Samples the BSDF at a photon; returns the next ray and flux, divided by the continuation
 /// probability q = min(1, max weight). With `roulette` the path ends with probability 1 − q;
 /// without, the caller knows the path already survived q at this photon.
 fn scatter(scene: &Scene, p: &Photon, rng: &mut Rng, roulette: bool) -> Option<(Vec3, Vec3, Rgb)> {
     let material = &scene.materials[scene.objects[p.object as usize].material as usize];
-    let n = surface_normal(scene, p);
-    let bs = material.sample(n, -p.incoming, rng.next_2d(), rng.next_f32())?;
+    let normals = photon_normals(scene, p);
+    let n = normals.geometric;
+    let bs = material.sample(normals, -p.incoming, rng.next_2d(), rng.next_f32(), Transport::Importance)?;
     let q = bs.weight.max_component().min(1.0);
     if q <= 0.0 || (roulette && rng.next_f32() >= q) {
         return None;
