@@ -59,18 +59,34 @@ pub enum Transport {
 pub struct Normals {
     pub geometric: Vec3,
     pub shading: Vec3,
+    /// The two differ: tested once here, so a flat surface's BSDF never compares them.
+    smooth: bool,
 }
 
 impl Normals {
+    #[inline]
+    pub fn new(geometric: Vec3, shading: Vec3) -> Normals {
+        Normals { geometric, shading, smooth: geometric != shading }
+    }
+
+    /// Normals already known to differ (`smooth`) or not, which saves [`Normals::new`]'s test
+    /// where a hit's triangle says so.
+    #[inline]
+    pub fn known(geometric: Vec3, shading: Vec3, smooth: bool) -> Normals {
+        Normals { geometric, shading, smooth }
+    }
+
+    #[inline]
     pub fn flat(n: Vec3) -> Normals {
-        Normals { geometric: n, shading: n }
+        Normals { geometric: n, shading: n, smooth: false }
     }
 
     /// The factor `max(0, ns·w) / |ng·w|` by which a smooth diffuse surface's BSDF differs from a
     /// flat one's for light arriving from `w` (both normals turned to `w`'s side); exactly 1
     /// when the normals agree, 0 for light below the shading horizon or along the surface.
+    #[inline]
     pub fn diffuse_factor(&self, w: Vec3) -> f32 {
-        if self.shading == self.geometric {
+        if !self.smooth {
             return 1.0;
         }
         let g = self.geometric.dot(w);
@@ -81,6 +97,7 @@ impl Normals {
     }
 
     /// [`Normals::diffuse_factor`] of the direction light arrives from.
+    #[inline]
     fn arrival_factor(&self, wo: Vec3, wi: Vec3, mode: Transport) -> f32 {
         match mode {
             Transport::Radiance => self.diffuse_factor(wi),
@@ -241,7 +258,7 @@ mod tests {
     /// A diffuse material with shading normal `tilt` radians from the geometric +Z, towards +X.
     fn tilted(tilt: f32) -> (Material, Normals) {
         let shading = Vec3::new(tilt.sin(), 0.0, tilt.cos());
-        (Material::Diffuse { reflectance: Rgb::splat(0.5) }, Normals { geometric: Vec3::Z, shading })
+        (Material::Diffuse { reflectance: Rgb::splat(0.5) }, Normals::new(Vec3::Z, shading))
     }
 
     #[test]

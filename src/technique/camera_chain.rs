@@ -35,7 +35,7 @@ impl DiffuseHit {
     }
 
     pub fn normals(&self) -> Normals {
-        Normals { geometric: self.n, shading: self.ns }
+        Normals::new(self.n, self.ns)
     }
 
     /// The geometric normal on the side the sample arrives from.

@@ -37,7 +37,7 @@ pub struct Vertex {
 
 impl Vertex {
     pub fn normals(&self) -> Normals {
-        Normals { geometric: self.n, shading: self.ns }
+        Normals::new(self.n, self.ns)
     }
 }
 

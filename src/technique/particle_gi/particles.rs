@@ -240,7 +240,7 @@ impl AreaParticles {
     /// Particle `i`'s normals (both flat unless some object is smooth-shaded).
     pub fn normals(&self, i: usize) -> Normals {
         let geometric = self.normal[i];
-        Normals { geometric, shading: self.shading.get(i).copied().unwrap_or(geometric) }
+        Normals::new(geometric, self.shading.get(i).copied().unwrap_or(geometric))
     }
 
     pub fn len(&self) -> usize {
