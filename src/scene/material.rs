@@ -164,7 +164,8 @@ impl Material {
     /// The weight `f·|cos|/pdf` with which [`Material::sample`] returns `wi` (for specular
     /// lobes, the lobe's weight with the lobe choice cancelled): the reflectance for diffuse and
     /// mirror (diffuse times its shading factor), 1 for glass reflection and for glass
-    /// transmission 1/η² of radiance (1 of importance). Black if `wi` lies on a side the material cannot send light to.
+    /// transmission 1/η² of radiance (1 of importance). Black if `wi` lies on a side the
+    /// material cannot send light to.
     pub fn sampled_weight(&self, normals: Normals, wo: Vec3, wi: Vec3, mode: Transport) -> Rgb {
         let n = normals.geometric;
         let same_side = n.dot(wo) * n.dot(wi) > 0.0;
