@@ -144,13 +144,10 @@ pub fn gather(links: &LinkSet, lighting: &Lighting, needed: &[u32], particles: &
         .par_iter()
         .flat_map_iter(|&i| {
             let ends = links.ends_of(i as usize);
-            let factors: Vec<f32> = (0..ends.len()).map(|k| links.receive_factor(particles, i as usize, k)).collect();
             (0..shares).map(move |g| {
-                let sum = ends
-                    .iter()
-                    .zip(&factors)
-                    .filter(|(&e, _)| e < NON_DIFFUSE)
-                    .fold(Rgb::BLACK, |s, (&e, &f)| s + lighting.radiance[e as usize * shares + g] * f);
+                let sum = ends.iter().enumerate().filter(|(_, &e)| e < NON_DIFFUSE).fold(Rgb::BLACK, |s, (k, &e)| {
+                    s + lighting.radiance[e as usize * shares + g] * links.receive_factor(particles, i as usize, k)
+                });
                 sum * (PI / per as f32)
             })
         })
