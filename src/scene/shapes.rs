@@ -226,6 +226,9 @@ impl Mesh {
             tobj::load_obj(path, &options).map_err(|e| format!("cannot read OBJ {}: {e}", path.display()))?;
         let mut mesh = Mesh::default();
         let smooth = models.iter().all(|m| m.mesh.normals.len() == m.mesh.positions.len());
+        if !smooth && models.iter().any(|m| !m.mesh.normals.is_empty()) {
+            tracing::warn!("{}: some objects have no vertex normals, so the whole mesh shades flat", path.display());
+        }
         for model in models {
             let base = mesh.positions.len() as u32;
             for (i, n) in model.mesh.normals.chunks_exact(3).enumerate().filter(|_| smooth) {
