@@ -11,8 +11,10 @@
 //! BSDF is `ρ/π · max(0, ns·w)/|ng·w|` ([`Normals::diffuse_factor`] of the arrival direction):
 //! no longer symmetric, so each evaluation says which of `wo` and `wi` light arrives from
 //! ([`Transport`]). Sampling stays cosine-weighted about the geometric normal. Light arriving
-//! below the shading normal's horizon is not reflected. Mirrors and glass keep the geometric
-//! normal: smooth meshes of them still show their facets.
+//! below the shading normal's horizon is not reflected. Mirrors and glass reflect and refract
+//! about the shading normal (pbrt-v3's convention): a direction that would end on the wrong
+//! side of the geometric surface is absorbed, and importance is weighted by
+//! `|ns·wo|·|ng·wi| / (|ng·wo|·|ns·wi|)` ([`Normals::specular_adjoint`]).
 use super::model::Material;
 use crate::core::{sampling, Rgb, ShadingFrame};
 use glam::{Vec2, Vec3};
@@ -96,6 +98,21 @@ impl Normals {
         (self.shading.dot(w) / g).max(0.0)
     }
 
+    /// The factor `|ns·wo|·|ng·wi| / (|ng·wo|·|ns·wi|)` by which a smooth specular lobe's
+    /// importance differs from its radiance (Veach 1997, §5.3); 1 for radiance and when the
+    /// normals agree.
+    #[inline]
+    pub fn specular_adjoint(&self, wo: Vec3, wi: Vec3, mode: Transport) -> f32 {
+        if !self.smooth || mode == Transport::Radiance {
+            return 1.0;
+        }
+        let den = self.geometric.dot(wo).abs() * self.shading.dot(wi).abs();
+        if den == 0.0 {
+            return 0.0;
+        }
+        self.shading.dot(wo).abs() * self.geometric.dot(wi).abs() / den
+    }
+
     /// [`Normals::diffuse_factor`] of the direction light arrives from.
     #[inline]
     fn arrival_factor(&self, wo: Vec3, wi: Vec3, mode: Transport) -> f32 {
@@ -104,6 +121,28 @@ impl Normals {
             Transport::Importance => self.diffuse_factor(wo),
         }
     }
+}
+
+/// A specular sample towards `wi` with `weight` (before the adjoint factor), refracted into
+/// relative index `eta` or reflected (`eta` None); `None` where a smooth surface's lobe sends
+/// `wi` to the wrong side of the geometric surface (a reflection below it, a refraction that
+/// stays above).
+fn specular(
+    normals: Normals,
+    wo: Vec3,
+    wi: Vec3,
+    weight: Rgb,
+    eta: Option<f32>,
+    mode: Transport,
+) -> Option<BsdfSample> {
+    let n = normals.geometric;
+    let crosses = n.dot(wo) * n.dot(wi) <= 0.0;
+    if normals.smooth && crosses != eta.is_some() {
+        return None;
+    }
+    let eta = eta.unwrap_or(1.0);
+    let weight = weight * normals.specular_adjoint(wo, wi, mode);
+    Some(BsdfSample { wi, weight, pdf: 0.0, specular: true, eta })
 }
 
 /// Radiance crossing into a medium of relative index `eta` is scaled by 1/η²; importance
@@ -171,11 +210,11 @@ impl Material {
         let same_side = n.dot(wo) * n.dot(wi) > 0.0;
         match self {
             Material::Diffuse { reflectance } if same_side => *reflectance * normals.arrival_factor(wo, wi, mode),
-            Material::Mirror { reflectance } if same_side => *reflectance,
-            Material::Glass { .. } if same_side => Rgb::WHITE,
+            Material::Mirror { reflectance } if same_side => *reflectance * normals.specular_adjoint(wo, wi, mode),
+            Material::Glass { .. } if same_side => Rgb::splat(normals.specular_adjoint(wo, wi, mode)),
             Material::Glass { ior } => {
                 let eta = if n.dot(wo) > 0.0 { *ior } else { 1.0 / *ior };
-                Rgb::splat(refraction_scale(eta, mode))
+                Rgb::splat(refraction_scale(eta, mode) * normals.specular_adjoint(wo, wi, mode))
             }
             _ => Rgb::BLACK,
         }
@@ -190,6 +229,7 @@ impl Material {
             return None;
         }
         let nf = if cos_o > 0.0 { n } else { -n };
+        let ns_f = if cos_o > 0.0 { normals.shading } else { -normals.shading };
         match self {
             Material::Diffuse { reflectance } => {
                 let local = sampling::cosine_hemisphere(u);
@@ -205,27 +245,19 @@ impl Material {
                     eta: 1.0,
                 })
             }
-            Material::Mirror { reflectance } => {
-                Some(BsdfSample { wi: reflect(wo, nf), weight: *reflectance, pdf: 0.0, specular: true, eta: 1.0 })
-            }
+            Material::Mirror { reflectance } => specular(normals, wo, reflect(wo, ns_f), *reflectance, None, mode),
             Material::Glass { ior } => {
                 // Entering when wo is on the outside (the side the outward normal points to).
                 let eta = if cos_o > 0.0 { *ior } else { 1.0 / *ior };
-                let cos_i = cos_o.abs();
+                let cos_i = ns_f.dot(wo).max(0.0);
                 let f = fresnel_dielectric(cos_i, eta);
                 if uc < f {
-                    return Some(BsdfSample {
-                        wi: reflect(wo, nf),
-                        weight: Rgb::WHITE,
-                        pdf: 0.0,
-                        specular: true,
-                        eta: 1.0,
-                    });
+                    return specular(normals, wo, reflect(wo, ns_f), Rgb::WHITE, None, mode);
                 }
                 let sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
                 let cos_t = (1.0 - sin2_t).max(0.0).sqrt();
-                let wi = (-wo / eta + (cos_i / eta - cos_t) * nf).normalize();
-                Some(BsdfSample { wi, weight: Rgb::splat(refraction_scale(eta, mode)), pdf: 0.0, specular: true, eta })
+                let wi = (-wo / eta + (cos_i / eta - cos_t) * ns_f).normalize();
+                specular(normals, wo, wi, Rgb::splat(refraction_scale(eta, mode)), Some(eta), mode)
             }
         }
     }
@@ -289,6 +321,34 @@ mod tests {
                 let expect = m.eval(normals, wo, s.wi, mode) * (s.wi.z.abs() / m.pdf(Vec3::Z, wo, s.wi));
                 assert!((expect.r - s.weight.r).abs() <= 1e-4 * expect.r.max(1.0), "{mode:?}: {expect:?} vs {s:?}");
                 assert_eq!(s.weight, m.sampled_weight(normals, wo, s.wi, mode));
+            }
+        }
+    }
+
+    #[test]
+    fn smooth_specular_samples_stay_on_their_side_and_match_their_sampled_weights() {
+        // Property: about a tilted shading normal, reflections leave on wo's side of the
+        // geometric surface and refractions cross it (or the sample is absorbed), and
+        // sampled_weight gives back each sample's weight in both modes (photon_reuse re-weights
+        // stored escapes with it). Importance differs from radiance by the adjoint factor.
+        let shading = Vec3::new(0.6f32.sin(), 0.0, 0.6f32.cos());
+        let normals = Normals::new(Vec3::Z, shading);
+        let mut rng = crate::core::Rng::new(5, 6);
+        for m in [Material::Mirror { reflectance: Rgb::splat(0.8) }, Material::Glass { ior: 1.5 }] {
+            for _ in 0..200 {
+                let wo = sampling::uniform_sphere(rng.next_2d());
+                let (u, uc) = (rng.next_2d(), rng.next_f32());
+                let Some(r) = m.sample(normals, wo, u, uc, Transport::Radiance) else { continue };
+                let i = m.sample(normals, wo, u, uc, Transport::Importance).expect("the same lobe");
+                assert_eq!(r.wi, i.wi);
+                let crosses = wo.z * r.wi.z <= 0.0;
+                assert_eq!(crosses, r.eta != 1.0, "{m:?}: {wo} to {}", r.wi);
+                for (s, mode) in [(r, Transport::Radiance), (i, Transport::Importance)] {
+                    assert_eq!(s.weight, m.sampled_weight(normals, wo, s.wi, mode), "{m:?} {mode:?}");
+                }
+                let adjoint = shading.dot(wo).abs() * r.wi.z.abs() / (wo.z.abs() * shading.dot(r.wi).abs());
+                let glass_flux = if r.eta != 1.0 { r.eta * r.eta } else { 1.0 };
+                assert!((i.weight.g - r.weight.g * adjoint * glass_flux).abs() <= 1e-4 * i.weight.g.max(1.0));
             }
         }
     }
