@@ -163,6 +163,13 @@ fn interpolate_shading_normal(ns: &[Vec3; 3], n: Vec3, u: f32, v: f32) -> Vec3 {
     }
 }
 
+/// The shading normal of an object's triangle `prim` at barycentrics (`u`, `v`): its vertex
+/// normals interpolated, or its geometric normal if the object has none.
+fn shading_normal_of(o: &SceneObject, prim: u32, u: f32, v: f32) -> Vec3 {
+    let n = o.hit_triangles[prim as usize].normal;
+    o.shading_normals.get(prim as usize).map_or(n, |vertex_normals| interpolate_shading_normal(vertex_normals, n, u, v))
+}
+
 /// The barycentrics (u, v) of `p` projected onto triangle `[a, b, c]` (weights of `b` and `c`).
 fn barycentrics([a, b, c]: &[Vec3; 3], p: Vec3) -> (f32, f32) {
     let (e1, e2, d) = (*b - *a, *c - *a, p - *a);
@@ -312,18 +319,13 @@ impl Scene {
             SurfaceId::Object(i) => {
                 let o = &self.objects[i as usize];
                 let t = &o.hit_triangles[prim as usize];
-                let ns = if t.smooth {
-                    o.shading_normals
-                        .get(prim as usize)
-                        .map_or(t.normal, |vertex_normals| interpolate_shading_normal(vertex_normals, t.normal, u, v))
-                } else {
-                    t.normal
-                };
+                let ns = if t.smooth { shading_normal_of(o, prim, u, v) } else { t.normal };
                 (t.vertices, t.normal, ns, t.smooth)
             }
             SurfaceId::Light(_) => {
                 let t = self.triangle(surface, prim);
-                (t, unit_normal(t), unit_normal(t), false)
+                let n = unit_normal(t);
+                (t, n, n, false)
             }
         };
         let p = a * (1.0 - u - v) + b * u + c * v;
@@ -335,9 +337,11 @@ impl Scene {
     pub fn normals_at(&self, object: u32, prim: u32, p: Vec3) -> Normals {
         let o = &self.objects[object as usize];
         let t = &o.hit_triangles[prim as usize];
-        let Some(vertex_normals) = o.shading_normals.get(prim as usize) else { return Normals::flat(t.normal) };
+        if !t.smooth {
+            return Normals::flat(t.normal);
+        }
         let (u, v) = barycentrics(&t.vertices, p);
-        Normals::new(t.normal, interpolate_shading_normal(vertex_normals, t.normal, u, v))
+        Normals::new(t.normal, shading_normal_of(o, prim, u, v))
     }
 
     /// Unit geometric normal of a triangle, from its winding (zero for a light without one).

@@ -40,19 +40,20 @@ impl DiffuseHit {
 
     /// The geometric normal on the side the sample arrives from.
     pub fn facing(&self) -> Vec3 {
-        if self.n.dot(self.wo) >= 0.0 {
-            self.n
-        } else {
-            -self.n
-        }
+        self.turned_to_viewer(self.n)
     }
 
     /// The shading normal on the side the sample arrives from (the geometric normal's side).
     pub fn shading_facing(&self) -> Vec3 {
+        self.turned_to_viewer(self.ns)
+    }
+
+    /// `v`, negated if the sample arrives from the geometric normal's back side.
+    fn turned_to_viewer(&self, v: Vec3) -> Vec3 {
         if self.n.dot(self.wo) >= 0.0 {
-            self.ns
+            v
         } else {
-            -self.ns
+            -v
         }
     }
 }

@@ -208,8 +208,7 @@ impl LinkSet {
         if particles.shading.is_empty() {
             return 1.0;
         }
-        let d = self.direction(&ShadingFrame::from_normal(particles.normal[i]), i, k);
-        particles.normals(i).diffuse_factor(d)
+        particles.normals(i).diffuse_factor(self.link_direction(particles, i, k))
     }
 
     /// The shading factor at `end` of flux arriving along link `k` of particle `i` (1 unless
@@ -218,13 +217,16 @@ impl LinkSet {
         if particles.shading.is_empty() {
             return 1.0;
         }
-        let d = self.direction(&ShadingFrame::from_normal(particles.normal[i]), i, k);
-        particles.normals(end).diffuse_factor(-d)
+        particles.normals(end).diffuse_factor(-self.link_direction(particles, i, k))
+    }
+
+    /// Unit world direction of link `k` of particle `i`, in the frame of its geometric normal.
+    fn link_direction(&self, particles: &AreaParticles, i: usize, k: usize) -> Vec3 {
+        self.direction(&ShadingFrame::from_normal(particles.normal[i]), i, k)
     }
 
     fn ray(&self, particles: &AreaParticles, i: usize, k: usize) -> Ray {
-        let frame = ShadingFrame::from_normal(particles.normal[i]);
-        Ray::new(offset_ray_origin(particles.position[i], particles.normal[i]), self.direction(&frame, i, k))
+        Ray::new(offset_ray_origin(particles.position[i], particles.normal[i]), self.link_direction(particles, i, k))
     }
 
     fn trace(&self, target: Target, i: usize, k: usize) -> Traced {
