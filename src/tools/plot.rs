@@ -8,9 +8,9 @@ use std::path::Path;
 
 const SIZE: (u32, u32) = (960, 600);
 
-/// The `i`-th colour of an eight-colour palette (matplotlib's first eight), repeating.
+/// The `i`-th colour of a ten-colour palette (matplotlib's `tab10`), repeating.
 pub fn colour(i: usize) -> RGBColor {
-    const PALETTE: [RGBColor; 8] = [
+    const PALETTE: [RGBColor; 10] = [
         RGBColor(31, 119, 180),
         RGBColor(255, 127, 14),
         RGBColor(44, 160, 44),
@@ -19,8 +19,33 @@ pub fn colour(i: usize) -> RGBColor {
         RGBColor(140, 86, 75),
         RGBColor(227, 119, 194),
         RGBColor(127, 127, 127),
+        RGBColor(188, 189, 34),
+        RGBColor(23, 190, 207),
     ];
     PALETTE[i % PALETTE.len()]
+}
+
+/// A configuration run with the denoise stage (`bench error`'s `+oidn` twins).
+pub fn denoised(label: &str) -> bool {
+    label.contains("+oidn")
+}
+
+/// One colour per label, shared by a configuration and its denoised twin (the same label but
+/// for its `+oidn…` suffix), so ten configurations with their twins take five colours, not ten
+/// that repeat. Families take the palette in order of first appearance.
+pub fn family_colours<'a>(labels: impl IntoIterator<Item = &'a str>) -> Vec<RGBColor> {
+    let mut families: Vec<&str> = Vec::new();
+    labels
+        .into_iter()
+        .map(|label| {
+            let family = label.split_once("+oidn").map_or(label, |(head, _)| head);
+            let i = families.iter().position(|&f| f == family).unwrap_or_else(|| {
+                families.push(family);
+                families.len() - 1
+            });
+            colour(i)
+        })
+        .collect()
 }
 
 /// A plotting error as an `anyhow` error.
@@ -87,14 +112,21 @@ impl Plot for Lines {
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()
             .map_err(err)?;
-        for (i, (label, points)) in self.series.iter().enumerate() {
-            let c = colour(i);
+        // A denoised twin is drawn dashed in its configuration's colour.
+        let colours = family_colours(self.series.iter().map(|(label, _)| label.as_str()));
+        for ((label, points), c) in self.series.iter().zip(colours) {
             let points = points.iter().copied().filter(|p| p.1 > 0.0);
-            chart
-                .draw_series(LineSeries::new(points, ShapeStyle::from(&c).stroke_width(2)))
-                .map_err(err)?
-                .label(label.clone())
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
+            let style = ShapeStyle::from(&c).stroke_width(2);
+            let drawn = if denoised(label) {
+                chart.draw_series(DashedLineSeries::new(points, 8, 5, style))
+            } else {
+                chart.draw_series(LineSeries::new(points, style))
+            };
+            let dashed = denoised(label);
+            drawn.map_err(err)?.label(label.clone()).legend(move |(x, y)| {
+                let (dash, gap) = if dashed { (6, 3) } else { (18, 1) };
+                plotters::element::DashedPathElement::new(vec![(x, y), (x + 18, y)], dash, gap, style)
+            });
         }
         legend(&mut chart)
     }
@@ -150,5 +182,29 @@ impl Plot for StackedBars {
                 .legend(move |(x, y)| Rectangle::new([(x, y - 6), (x + 14, y + 6)], c.filled()));
         }
         legend(&mut chart)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_configuration_and_its_denoised_twin_share_a_colour_and_families_differ() {
+        // `bench error --denoise` lists each configuration next to its `+oidn` twin: five
+        // techniques make ten labels. Colouring by index repeated the eight-colour palette, so
+        // `path` and the ninth label looked alike; by family, twins match and the five differ.
+        let labels = ["path:spp=1", "path:spp=1+oidn", "bdpt", "bdpt+oidn=fast", "photon_reuse", "instant_cache"];
+        let c = family_colours(labels);
+        assert_eq!(c[0], c[1], "a twin takes its configuration's colour");
+        assert_eq!(c[2], c[3], "whatever its quality");
+        let distinct = [c[0], c[2], c[4], c[5]];
+        for (i, a) in distinct.iter().enumerate() {
+            assert!(distinct[i + 1..].iter().all(|b| b != a), "families {distinct:?} share a colour");
+        }
+        assert!(denoised(labels[3]) && !denoised(labels[2]));
+        let ten: Vec<String> = (0..10).map(|i| format!("t{i}")).collect();
+        let c = family_colours(ten.iter().map(String::as_str));
+        assert!((0..10).all(|i| c[i + 1..].iter().all(|b| *b != c[i])), "ten families need ten colours");
     }
 }

@@ -7,7 +7,7 @@
 //!   converges, or how error builds up over an animation;
 //! - `stage_times`: median time per tick stage, stacked, per configuration (their Figure 8).
 use super::{ErrorReport, FrameResult};
-use crate::tools::plot::{colour, err, legend, write_both, Lines, Plot, StackedBars};
+use crate::tools::plot::{denoised, err, family_colours, legend, write_both, Lines, Plot, StackedBars};
 use anyhow::Result;
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -74,12 +74,13 @@ impl Plot for TimeVsError<'_> {
             .map_err(err)?
             .label("Pareto front")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], BLACK.mix(0.5)));
-        // Denoised configurations (`+oidn`) are triangles, the raw ones circles.
-        for (i, x) in s.iter().enumerate() {
-            let c = colour(i);
+        // Denoised configurations (`+oidn`) are triangles in their raw twin's colour, the raw
+        // ones circles.
+        let colours = family_colours(s.iter().map(|x| x.config.as_str()));
+        for (x, c) in s.iter().zip(colours) {
             let label = format!("{}{}", if x.pareto { "★ " } else { "" }, x.config);
             let at = (x.tick_ms_median, x.flip_hdr);
-            if x.config.contains("+oidn") {
+            if denoised(&x.config) {
                 chart
                     .draw_series(std::iter::once(TriangleMarker::new(at, 9, c.filled())))
                     .map_err(err)?
