@@ -117,14 +117,15 @@ impl Plot for Lines {
         for ((label, points), c) in self.series.iter().zip(colours) {
             let points = points.iter().copied().filter(|p| p.1 > 0.0);
             let style = ShapeStyle::from(&c).stroke_width(2);
-            let drawn = if denoised(label) {
+            let dashed = denoised(label);
+            let drawn = if dashed {
                 chart.draw_series(DashedLineSeries::new(points, 8, 5, style))
             } else {
                 chart.draw_series(LineSeries::new(points, style))
             };
-            let dashed = denoised(label);
+            // The legend's sample is one 18-pixel dash for a solid line.
+            let (dash, gap) = if dashed { (6, 3) } else { (18, 1) };
             drawn.map_err(err)?.label(label.clone()).legend(move |(x, y)| {
-                let (dash, gap) = if dashed { (6, 3) } else { (18, 1) };
                 plotters::element::DashedPathElement::new(vec![(x, y), (x + 18, y)], dash, gap, style)
             });
         }
