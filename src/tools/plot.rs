@@ -1,6 +1,7 @@
 //! The plots the benchmarks write, each as PNG and SVG (plotters): a value per frame as one line
 //! per configuration ([`Lines`]), and a median time per stage as one stacked bar per
 //! configuration ([`StackedBars`]). `bench error` and `bench icache` draw their data with them.
+use crate::tools::bench_error::DENOISED_MARK;
 use anyhow::{anyhow, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -25,20 +26,26 @@ pub fn colour(i: usize) -> RGBColor {
     PALETTE[i % PALETTE.len()]
 }
 
-/// A configuration run with the denoise stage (`bench error`'s `+oidn` twins).
-pub fn denoised(label: &str) -> bool {
-    label.contains("+oidn")
+/// A label's configuration (the label less its denoise suffix) and whether it is the denoised
+/// twin (`bench error`'s [`DENOISED_MARK`]).
+fn family_of(label: &str) -> (&str, bool) {
+    label.split_once(DENOISED_MARK).map_or((label, false), |(head, _)| (head, true))
 }
 
-/// One colour per label, shared by a configuration and its denoised twin (the same label but
-/// for its `+oidn…` suffix), so ten configurations with their twins take five colours, not ten
-/// that repeat. Families take the palette in order of first appearance.
+/// A configuration run with the denoise stage.
+pub fn denoised(label: &str) -> bool {
+    family_of(label).1
+}
+
+/// One colour per label, shared by a configuration and its denoised twin, so ten
+/// configurations with their twins take five colours, not ten that repeat. Families take the
+/// palette in order of first appearance.
 pub fn family_colours<'a>(labels: impl IntoIterator<Item = &'a str>) -> Vec<RGBColor> {
     let mut families: Vec<&str> = Vec::new();
     labels
         .into_iter()
         .map(|label| {
-            let family = label.split_once("+oidn").map_or(label, |(head, _)| head);
+            let family = family_of(label).0;
             let i = families.iter().position(|&f| f == family).unwrap_or_else(|| {
                 families.push(family);
                 families.len() - 1

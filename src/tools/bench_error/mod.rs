@@ -73,6 +73,10 @@ pub struct ErrorArgs {
     pub denoise: Option<String>,
 }
 
+/// What a configuration's spec and label append for the denoise stage: `path:spp=1+oidn`. The
+/// plots tell a denoised twin from its configuration by it.
+pub const DENOISED_MARK: &str = "+oidn";
+
 /// One benchmarked configuration: a technique, denoised or not.
 #[derive(Clone, Debug, PartialEq)]
 pub struct BenchConfig {
@@ -83,7 +87,7 @@ pub struct BenchConfig {
 impl BenchConfig {
     /// `SPEC[+oidn[=QUALITY][:noaux]]`.
     pub fn parse(spec: &str) -> Result<BenchConfig, UsageError> {
-        let (technique, denoise) = match spec.split_once("+oidn") {
+        let (technique, denoise) = match spec.split_once(DENOISED_MARK) {
             None => (spec, None),
             Some((t, "")) => (t, Some(DenoiseSettings::default())),
             Some((t, rest)) => {
@@ -111,9 +115,9 @@ impl BenchConfig {
         let t = self.technique.label();
         match self.denoise {
             None => t,
-            Some(d) if d == DenoiseSettings::default() => format!("{t}+oidn"),
-            Some(d) if d.aux => format!("{t}+oidn={}", d.quality.name()),
-            Some(d) => format!("{t}+oidn={}:noaux", d.quality.name()),
+            Some(d) if d == DenoiseSettings::default() => format!("{t}{DENOISED_MARK}"),
+            Some(d) if d.aux => format!("{t}{DENOISED_MARK}={}", d.quality.name()),
+            Some(d) => format!("{t}{DENOISED_MARK}={}:noaux", d.quality.name()),
         }
     }
 }
