@@ -110,11 +110,21 @@ impl Plot for Lines {
             .margin(16)
             .x_label_area_size(44)
             .y_label_area_size(72)
-            .build_cartesian_2d(0.0..frames, (lo..hi).log_scale())
+            .build_cartesian_2d(
+                0.0..frames,
+                (lo..hi).log_scale().with_key_points(log_labels(lo, hi)).with_light_points(log_steps(
+                    lo,
+                    hi,
+                    &[1, 2, 3, 4, 5, 6, 7, 8, 9],
+                )),
+            )
             .map_err(err)?;
+        // Frames are whole numbers: a label between two frames is left blank.
+        let whole = |v: &f64| if v.fract() == 0.0 { format!("{v:.0}") } else { String::new() };
         chart
             .configure_mesh()
             .x_desc("frame")
+            .x_label_formatter(&whole)
             .y_desc(format!("{} (log)", self.unit))
             .y_label_formatter(&|v| format!("{v:.0e}"))
             .draw()
@@ -138,6 +148,25 @@ impl Plot for Lines {
         }
         legend(&mut chart)
     }
+}
+
+/// The values m × 10^k in `lo..=hi` for each mantissa m in `mantissas`, ascending.
+fn log_steps(lo: f64, hi: f64, mantissas: &[u32]) -> Vec<f64> {
+    let (first, last) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+    let decades = (first..=last).map(|k| 10f64.powi(k));
+    let values = decades.flat_map(|d| mantissas.iter().map(move |&m| f64::from(m) * d));
+    values.filter(|v| (lo..=hi).contains(v)).collect()
+}
+
+/// The labelled values of a log axis over `lo..hi`: the powers of ten when it spans at least
+/// three, otherwise 1-2-5 steps, or every unit step (at least three when `hi ≥ 4 lo`). (Plotters'
+/// own labels are the powers of ten, so a range inside one decade got one label or none.)
+fn log_labels(lo: f64, hi: f64) -> Vec<f64> {
+    [&[1][..], &[1, 2, 5], &[1, 2, 3, 4, 5, 6, 7, 8, 9]]
+        .iter()
+        .map(|m| log_steps(lo, hi, m))
+        .find(|v| v.len() >= 3)
+        .unwrap_or_else(|| log_steps(lo, hi, &[1, 2, 3, 4, 5, 6, 7, 8, 9]))
 }
 
 /// Median milliseconds per stage, one bar per configuration with its stages stacked.
@@ -214,5 +243,21 @@ mod tests {
         let ten: Vec<String> = (0..10).map(|i| format!("t{i}")).collect();
         let c = family_colours(ten.iter().map(String::as_str));
         assert!((0..10).all(|i| c[i + 1..].iter().all(|b| *b != c[i])), "ten families need ten colours");
+    }
+
+    #[test]
+    fn a_log_axis_has_three_labels_whatever_its_span() {
+        // Powers of ten alone (plotters' choice, and the negative control below) label a range
+        // inside one decade once or not at all; 1-2-5 or unit steps fill it, and a wide range
+        // keeps only the powers of ten. `Lines` pads its values by 2× each way, so its ranges
+        // are at least 4× wide, as these are.
+        for (lo, hi) in [(0.002, 0.008), (0.0026, 0.0104), (0.2, 3.0), (1e-4, 0.5), (3e-7, 40.0)] {
+            let labels = log_labels(lo, hi);
+            assert!(labels.len() >= 3, "{lo}..{hi}: {labels:?}");
+            assert!(labels.iter().all(|v| (lo..=hi).contains(v)) && labels.windows(2).all(|w| w[0] < w[1]));
+            let spans_decades = log_steps(lo, hi, &[1]).len() >= 3;
+            assert_eq!(spans_decades, labels.iter().all(|v| v.log10().fract().abs() < 1e-9), "{lo}..{hi}: {labels:?}");
+        }
+        assert!(log_steps(0.002, 0.008, &[1]).len() < 3, "powers of ten alone must fail the first range");
     }
 }
