@@ -126,7 +126,7 @@ impl Plot for Lines {
             .x_desc("frame")
             .x_label_formatter(&whole)
             .y_desc(format!("{} (log)", self.unit))
-            .y_label_formatter(&|v| format!("{v:.0e}"))
+            .y_label_formatter(&|v| readable(*v))
             .draw()
             .map_err(err)?;
         // A denoised twin is drawn dashed in its configuration's colour.
@@ -148,6 +148,23 @@ impl Plot for Lines {
         }
         legend(&mut chart)
     }
+}
+
+/// A log axis's label: plain decimals from 0.001 to 99 999 ("0.002", "50"), else
+/// scientific ("1e-5"). Labels are m × 10^k with a one-digit m, so this is exact.
+fn readable(v: f64) -> String {
+    let exponent = v.abs().log10().floor();
+    if (-3.0..5.0).contains(&exponent) {
+        format!("{v:.0$}", (-exponent).max(0.0) as usize)
+    } else {
+        format!("{v:.0e}")
+    }
+}
+
+/// A linear axis's label without trailing zeros ("10", "2.5"), to three decimals.
+fn plain(v: f64) -> String {
+    let text = format!("{v:.3}");
+    text.trim_end_matches('0').trim_end_matches('.').to_string()
 }
 
 /// The values m × 10^k in `lo..=hi` for each mantissa m in `mantissas`, ascending.
@@ -202,6 +219,7 @@ impl Plot for StackedBars {
             .x_labels(2 * n + 1)
             .x_desc("configuration")
             .y_desc("ms")
+            .y_label_formatter(&|v| plain(*v))
             .x_label_formatter(&label_at)
             .draw()
             .map_err(err)?;
@@ -259,5 +277,20 @@ mod tests {
             assert_eq!(spans_decades, labels.iter().all(|v| v.log10().fract().abs() < 1e-9), "{lo}..{hi}: {labels:?}");
         }
         assert!(log_steps(0.002, 0.008, &[1]).len() < 3, "powers of ten alone must fail the first range");
+    }
+
+    #[test]
+    fn log_labels_read_as_plain_numbers_in_the_usual_range() {
+        // Each label parses back to its value, and only values outside 0.001..100 000 keep
+        // scientific notation. Negative control: the old `{:.0e}` labels ("5e1" for 50 ms)
+        // fail the second assertion.
+        for v in log_steps(1e-7, 1e7, &[1, 2, 5]) {
+            let text = readable(v);
+            let back: f64 = text.parse().expect("a label parses as a number");
+            assert!((back - v).abs() <= 1e-9 * v, "{v} reads as {text}");
+            assert_eq!(text.contains('e'), !(1e-3..1e5).contains(&(v * (1.0 + 1e-12))), "{v} reads as {text}");
+        }
+        assert_eq!(readable(50.0), "50");
+        assert_eq!([plain(10.0), plain(2.5), plain(0.30000000000000004)], ["10", "2.5", "0.3"]);
     }
 }
