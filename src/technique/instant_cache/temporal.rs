@@ -156,6 +156,10 @@ impl std::ops::AddAssign for Refresh {
 /// What one tick changed, prepared for the per-ray tests.
 pub struct TickChanges {
     pub vpls: VplDiff,
+    /// Per VPL of this tick, last tick's index (`u32::MAX` when `Invalidated`) and whether it
+    /// is `Same`: [`VplDiff::changes`] laid out for a loop without branches.
+    old_index: Vec<u32>,
+    same: Vec<bool>,
     old_vpls: Vec<Vpl>,
     moved: Arc<Moved>,
     /// Per VPL of this tick, the moved surfaces' new and old bounds seen from its anchor: a
@@ -265,7 +269,18 @@ impl TickChanges {
         if diff.identity && moved.now.is_none() {
             return None;
         }
+        let old_index = diff
+            .changes
+            .iter()
+            .map(|c| match *c {
+                VplChange::Same(o) | VplChange::Reweighted(o) => o,
+                VplChange::Invalidated => u32::MAX,
+            })
+            .collect();
+        let same = diff.changes.iter().map(|c| matches!(c, VplChange::Same(_))).collect();
         Some(TickChanges {
+            old_index,
+            same,
             vpls: diff,
             old_vpls,
             new_cones: Cones::new(vpls, &moved.new_bounds),
@@ -291,38 +306,48 @@ impl TickChanges {
             self.new_cones.mark(from, &mut in_new);
             self.old_cones.mark(from, &mut in_old);
         }
-        let contributions: Vec<u32> = vpls
-            .iter()
-            .zip(&self.vpls.changes)
-            .enumerate()
-            .map(|(k, (vpl, change))| {
-                let old = match *change {
-                    VplChange::Same(o) | VplChange::Reweighted(o) => o as usize,
-                    VplChange::Invalidated => return self.retrace(accel, vpl, &at, &mut work),
-                };
-                let before = record.contributions.get(old).copied().unwrap_or(0);
-                let cones = (in_new[k], in_old[k]);
-                match (change, before != 0, cones) {
-                    // The same VPL, and no moved surface is on its ray now (if it was seen) or
-                    // was on it (if it was not): its contribution stands, without G′ or a ray.
-                    (VplChange::Same(_), true, (false, _)) | (VplChange::Same(_), false, (_, false)) => before,
-                    (VplChange::Same(_), true, _) => {
-                        if self.still_visible(accel, vpl, from, true, cones, &mut work) {
-                            before
-                        } else {
-                            work.occluded += 1;
-                            0
-                        }
+        let (mut contributions, open) = self.triage(&record.contributions, &in_new, &in_old);
+        for k in open.into_iter().map(|k| k as usize) {
+            let (vpl, before, cones) = (&vpls[k], contributions[k], (in_new[k], in_old[k]));
+            contributions[k] = match self.vpls.changes[k] {
+                VplChange::Invalidated => self.retrace(accel, vpl, &at, &mut work),
+                VplChange::Same(_) if before != 0 => {
+                    if self.still_visible(accel, vpl, from, true, cones, &mut work) {
+                        before
+                    } else {
+                        work.occluded += 1;
+                        0
                     }
-                    _ => self.reevaluate(accel, (vpl, &self.old_vpls[old]), &at, (before, cones), &mut work),
                 }
-            })
-            .collect();
+                VplChange::Same(o) | VplChange::Reweighted(o) => {
+                    self.reevaluate(accel, (vpl, &self.old_vpls[o as usize]), &at, (before, cones), &mut work)
+                }
+            };
+        }
         // Unchanged contributions sum to the same bits: only a changed record is re-summed.
         if contributions != record.contributions {
             *record = Record::new(p, n, record.object, contributions, record.last_used);
         }
         work
+    }
+
+    /// Each VPL's contribution before (0 for a new VPL), and the VPLs whose contribution may
+    /// have changed: every VPL not `Same`, and a `Same` one whose ray lies in the new cones (if
+    /// it was seen) or the old ones (if it was not). The rest keep their contribution without
+    /// G′ or a ray. One pass without branches: which VPLs are open follows the shadows, which
+    /// a branch would mispredict.
+    fn triage(&self, before: &[u32], in_new: &[bool], in_old: &[bool]) -> (Vec<u32>, Vec<u32>) {
+        let count = self.old_index.len().min(in_new.len()).min(in_old.len());
+        let (mut contributions, mut open) = (vec![0u32; count], vec![0u32; count]);
+        let mut opened = 0;
+        for k in 0..count {
+            let c = before.get(self.old_index[k] as usize).copied().unwrap_or(0);
+            contributions[k] = c;
+            open[opened] = k as u32;
+            opened += usize::from(!self.same[k] | if c != 0 { in_new[k] } else { in_old[k] });
+        }
+        open.truncate(opened);
+        (contributions, open)
     }
 
     /// A ray to a VPL that was in shadow and may no longer be, or that changed intensity: G′
