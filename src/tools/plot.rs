@@ -1,13 +1,16 @@
 //! The plots the benchmarks write, each as PNG and SVG (plotters): a value per frame as one line
 //! per configuration ([`Lines`]), and a median time per stage as one stacked bar per
 //! configuration ([`StackedBars`]). `bench error` and `bench icache` draw their data with them.
-use crate::tools::bench_error::DENOISED_MARK;
 use anyhow::{anyhow, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
 use std::path::Path;
 
 const SIZE: (u32, u32) = (960, 600);
+
+/// What a configuration's spec and label append for the denoise stage (`bench error`'s
+/// `path:spp=1+oidn`): the plots tell a denoised twin from its configuration by it.
+pub const DENOISED_MARK: &str = "+oidn";
 
 /// The `i`-th colour of a ten-colour palette (matplotlib's `tab10`), repeating.
 pub fn colour(i: usize) -> RGBColor {
@@ -27,7 +30,7 @@ pub fn colour(i: usize) -> RGBColor {
 }
 
 /// A label's configuration (the label less its denoise suffix) and whether it is the denoised
-/// twin (`bench error`'s [`DENOISED_MARK`]).
+/// twin ([`DENOISED_MARK`]).
 fn family_of(label: &str) -> (&str, bool) {
     label.split_once(DENOISED_MARK).map_or((label, false), |(head, _)| (head, true))
 }

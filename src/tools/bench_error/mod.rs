@@ -21,6 +21,7 @@ use crate::film::{DenoiseQuality, DenoiseSettings};
 use crate::scene::animation::Animation;
 use crate::scene::Scene;
 use crate::technique::TechniqueConfig;
+use crate::tools::plot::DENOISED_MARK;
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 use metrics::ImageError;
@@ -72,10 +73,6 @@ pub struct ErrorArgs {
     #[arg(long, value_name = "QUALITY", num_args = 0..=1, require_equals = true, default_missing_value = "high")]
     pub denoise: Option<String>,
 }
-
-/// What a configuration's spec and label append for the denoise stage: `path:spp=1+oidn`. The
-/// plots tell a denoised twin from its configuration by it.
-pub const DENOISED_MARK: &str = "+oidn";
 
 /// One benchmarked configuration: a technique, denoised or not.
 #[derive(Clone, Debug, PartialEq)]
