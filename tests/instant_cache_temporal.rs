@@ -123,6 +123,32 @@ fn camera_samples_are_traced_again_only_where_a_change_can_reach_them() {
 }
 
 #[test]
+fn a_slab_moved_out_of_sight_uncovers_its_shadow_and_what_it_hid() {
+    // Property: when the slab moves out of the film (in front of the camera, beyond the right
+    // wall, where no shadow ray of the room runs), the samples that saw it and the direct
+    // light its old place shadowed are redone, and every kept sample equals a fresh trace
+    // (`assert_exact`); runs of pixels whose hits and shadow rays stay clear of both places
+    // are kept on their summary alone (`camera_runs_settled`). Negative control, by hand:
+    // testing the runs' hulls against the slab's new bounds only (not where it was) fails
+    // `assert_exact` here, and the other tests here do not see it.
+    let device = Device::new(2).unwrap();
+    let pool = thread_pool(2).unwrap();
+    let runs = (24 * 24u64).div_ceil(relume::technique::instant_cache::CAMERA_RUN as u64);
+    pool.install(|| {
+        let mut s = Session::new(room(HOVERING), &temporal(Reevaluation::Immediate), 5, &device).expect("session");
+        s.tick().unwrap();
+        for (label, to) in [("a shift", [0.05, HOVERING[1], HOVERING[2]]), ("out of sight", [3.5, 0.5, 0.8])] {
+            s.queue_edits(vec![move_slab(to)]).unwrap();
+            let moved = stats(&s.tick().unwrap());
+            assert_exact(label, &moved);
+            assert!(moved.camera_rays > 0, "{label}: the pixels that saw the slab are traced again: {moved:?}");
+            let settled = moved.camera_runs_settled;
+            assert!(settled > 0 && settled < runs, "{label}: {settled} of {runs} runs settled: {moved:?}");
+        }
+    });
+}
+
+#[test]
 fn a_light_seen_from_behind_that_moves_away_uncovers_what_it_hid() {
     // A camera ray that meets the back of a rect light ends there with no emission and no hit,
     // as a ray that leaves the scene does. When the light moves away, the surface it hid must

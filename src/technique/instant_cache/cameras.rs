@@ -23,6 +23,16 @@
 //! again: still ticks with `refine_ticks: 0` draw a new stream each pass, so a still view
 //! converges.
 //!
+//! The kept samples are summarised by runs of [`RUN`] pixels of a row ([`RunBounds`]): the box
+//! of their hits and shadow-ray origins, the box of their shadow rays' ends, and whether one of
+//! them can never be kept or is a miss. A tick that may keep direct light skips a run without
+//! reading its samples when no moved surface's new or old bounds meet the hull of its two boxes
+//! (so none lies on a shadow ray, and no hit is on a moved object, whose hits lie in its old
+//! bounds), no miss can be changed by a light's moved shape, and its pixels lie outside the
+//! moved surfaces' film rectangles: its samples then pass every per-sample test, so the cost of
+//! a small move follows the pixels near it and the shadows it crosses, not the image. A run
+//! whose samples were looked at gets its summary again.
+//!
 //! Invariant (audited with `audit: true`, stat `audit_cameras_mismatched`): a kept sample
 //! equals a fresh trace of its camera ray in every field, and kept direct light equals a
 //! fresh sample of it, shadow ray included.
@@ -30,9 +40,10 @@ use super::temporal::Moved;
 use super::CacheMode;
 use crate::core::{Rgb, Rng};
 use crate::embree::Ray;
+use crate::scene::edits::Aabb;
 use crate::technique::camera_chain::{self, CameraSample};
 use crate::technique::RenderContext;
-use glam::Vec2;
+use glam::{Vec2, Vec3};
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -45,8 +56,82 @@ pub struct Shaded {
     pub shadow: Option<Ray>,
 }
 
-/// Bytes a kept camera sample holds.
-pub const SHADED_BYTES: u64 = std::mem::size_of::<Shaded>() as u64;
+/// Bytes a kept camera sample holds, with its share of its run's summary.
+pub const SHADED_BYTES: u64 = (std::mem::size_of::<Shaded>() + std::mem::size_of::<RunBounds>().div_ceil(RUN)) as u64;
+
+/// Pixels in a run, the unit a tick skips (the last run of the image may be shorter).
+pub const RUN: usize = 32;
+
+/// One pass's camera samples, by pixel, and their runs' summaries, kept from tick to tick.
+#[derive(Default)]
+pub struct Samples {
+    pub shaded: Vec<Shaded>,
+    runs: Vec<RunBounds>,
+}
+
+impl Samples {
+    /// Bytes held.
+    pub fn bytes(&self) -> usize {
+        self.shaded.capacity() * std::mem::size_of::<Shaded>() + self.runs.capacity() * std::mem::size_of::<RunBounds>()
+    }
+}
+
+/// What a run's samples touch: `from` holds their hits and shadow-ray origins, `to` their
+/// shadow rays' ends (both empty when there are none); `never` if one of them cannot be kept
+/// (emission, a specular chain, a shadow ray without a finite end), `misses` if one is a miss.
+#[derive(Clone, Copy, Debug)]
+struct RunBounds {
+    from: Aabb,
+    to: Aabb,
+    never: bool,
+    misses: bool,
+}
+
+const EMPTY: Aabb = Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY };
+
+fn is_empty(b: &Aabb) -> bool {
+    b.min.x > b.max.x
+}
+
+impl RunBounds {
+    /// A run not summarised yet: never skipped.
+    const UNKNOWN: RunBounds = RunBounds { from: EMPTY, to: EMPTY, never: true, misses: true };
+
+    /// The summary of `run`'s samples.
+    fn of(run: &[Shaded]) -> RunBounds {
+        let grow = |b: &mut Aabb, p: Vec3| *b = Aabb { min: b.min.min(p), max: b.max.max(p) };
+        let mut r = RunBounds { from: EMPTY, to: EMPTY, never: false, misses: false };
+        for s in run {
+            r.never |= s.sample.specular_rays > 0 || !s.sample.emitted.is_black();
+            match &s.sample.hit {
+                Some(hit) => grow(&mut r.from, hit.p),
+                None => r.misses = true,
+            }
+            if let Some(ray) = &s.shadow {
+                let end = ray.origin + ray.dir * ray.tfar;
+                r.never |= !end.is_finite();
+                grow(&mut r.from, ray.origin);
+                grow(&mut r.to, end);
+            }
+        }
+        r
+    }
+
+    /// Does every sample of this run (pixels `pixels`) pass [`still_valid`] and keep its direct
+    /// light under `reuse`, by the run's summary alone?
+    fn settled(&self, reuse: &Reuse, pixels: std::ops::Range<usize>) -> bool {
+        let moved = reuse.moved;
+        if !reuse.direct || self.never || (self.misses && moved.light_shapes) || moved.may_show(pixels) {
+            return false;
+        }
+        // No hit and no shadow ray: nothing a moved surface could touch.
+        if is_empty(&self.from) {
+            return true;
+        }
+        let to = if is_empty(&self.to) { &self.from } else { &self.to };
+        moved.clear_of(&self.from, to)
+    }
+}
 
 /// What may have changed last tick's camera samples.
 pub enum CameraChange {
@@ -66,6 +151,8 @@ pub struct CameraCounts {
     pub shadow_rays: u64,
     /// Kept samples or direct light a fresh trace disagrees with (`audit` only).
     pub mismatched: u64,
+    /// Runs kept on their summary alone.
+    pub settled_runs: u64,
 }
 
 /// A pass's shading: its counts, and per sample whether its camera sample was kept (so its
@@ -82,13 +169,14 @@ const SHADOW_RAY: u8 = 4;
 const MISMATCHED: u8 = 8;
 
 impl Shading {
-    fn new(outcomes: &[u8]) -> Shading {
+    fn new(outcomes: &[u8], settled_runs: u64) -> Shading {
         let count = |bit: u8| outcomes.iter().filter(|&&o| o & bit != 0).count() as u64;
         let counts = CameraCounts {
             kept: count(KEPT),
             direct_kept: count(DIRECT_KEPT),
             shadow_rays: count(SHADOW_RAY),
             mismatched: count(MISMATCHED),
+            settled_runs,
         };
         Shading { counts, kept: outcomes.iter().map(|&o| o & KEPT != 0).collect() }
     }
@@ -118,7 +206,7 @@ fn still_valid(moved: &Moved, pixel: usize, ray: impl FnOnce() -> Ray, s: &Camer
         None => None,
     };
     let Some(now) = &moved.now else { return true };
-    if !moved.may_show(pixel) {
+    if !moved.may_show(pixel..pixel + 1) {
         return true;
     }
     let ray = ray();
@@ -131,26 +219,49 @@ fn still_valid(moved: &Moved, pixel: usize, ray: impl FnOnce() -> Ray, s: &Camer
 const RESIDENT_STREAM: u64 = u64::MAX;
 
 /// Pass `pass` (the `pass_in_tick`-th of its tick; passes count from the last change) of camera
-/// samples with their direct light, written over `shaded`. With `reuse` (`temporal`, and
-/// `shaded` holding last tick's samples of this pass), what is still valid is kept.
+/// samples with their direct light, written over `samples`. With `reuse` (`temporal`, and
+/// `samples` holding last tick's samples of this pass), what is still valid is kept: a run the
+/// summary settles is not read (with `audit`, its samples are checked against fresh traces).
 pub fn shade(
     ctx: &RenderContext,
     mode: CacheMode,
     (pass, pass_in_tick): (u64, u64),
-    shaded: &mut Vec<Shaded>,
+    samples: &mut Samples,
     reuse: Option<Reuse>,
     audit: bool,
 ) -> Shading {
     let scene = ctx.scene;
     let pixels = (scene.camera.width * scene.camera.height) as usize;
-    let reuse = reuse.filter(|_| shaded.len() == pixels);
-    shaded.resize(pixels, Shaded::default());
-    let outcomes: Vec<u8> = shaded
-        .par_iter_mut()
+    let runs = pixels.div_ceil(RUN);
+    let reuse = reuse.filter(|_| samples.shaded.len() == pixels && samples.runs.len() == runs);
+    samples.shaded.resize(pixels, Shaded::default());
+    samples.runs.resize(runs, RunBounds::UNKNOWN);
+    let mut outcomes = vec![0u8; pixels];
+    let settled_runs = samples
+        .shaded
+        .par_chunks_mut(RUN)
+        .zip(samples.runs.par_iter_mut())
+        .zip(outcomes.par_chunks_mut(RUN))
         .enumerate()
-        .map(|(i, s)| shade_one(ctx, i, s, &mut SampleRng::new(ctx, mode, i, (pass, pass_in_tick)), reuse, audit))
-        .collect();
-    Shading::new(&outcomes)
+        .map(|(r, ((run, bounds), outcomes))| {
+            let first = r * RUN;
+            let settled = reuse.is_some_and(|m| bounds.settled(&m, first..first + run.len()));
+            if settled && !audit {
+                outcomes.fill(KEPT | DIRECT_KEPT);
+                return 1;
+            }
+            for (k, (s, outcome)) in run.iter_mut().zip(outcomes.iter_mut()).enumerate() {
+                let i = first + k;
+                let rng = &mut SampleRng::new(ctx, mode, i, (pass, pass_in_tick));
+                *outcome = shade_one(ctx, i, s, rng, reuse, (settled, audit));
+            }
+            if !settled {
+                *bounds = RunBounds::of(run);
+            }
+            u64::from(settled)
+        })
+        .sum();
+    Shading::new(&outcomes, settled_runs)
 }
 
 /// A sample's sub-pixel point and random stream, made when first needed: `temporal`'s are
@@ -187,18 +298,19 @@ impl SampleRng {
     }
 }
 
-/// Shades pixel `i`'s sample `s`, keeping what `reuse` allows. Returns what happened, as bits.
+/// Shades pixel `i`'s sample `s`, keeping what `reuse` allows; `settled`: its run's summary
+/// already showed that the sample and its direct light are kept. Returns what happened, as bits.
 fn shade_one(
     ctx: &RenderContext,
     i: usize,
     s: &mut Shaded,
     r: &mut SampleRng,
     reuse: Option<Reuse>,
-    audit: bool,
+    (settled, audit): (bool, bool),
 ) -> u8 {
     let (scene, accel) = (ctx.scene, ctx.accel);
-    let keep =
-        reuse.is_some_and(|m| still_valid(m.moved, i, || camera_chain::camera_ray(scene, i, r.jitter()), &s.sample));
+    let keep = settled
+        || reuse.is_some_and(|m| still_valid(m.moved, i, || camera_chain::camera_ray(scene, i, r.jitter()), &s.sample));
     let mut outcome = if keep { KEPT } else { 0 };
     if keep && audit {
         let jitter = r.jitter();
@@ -210,7 +322,8 @@ fn shade_one(
         let jitter = r.jitter();
         s.sample = camera_chain::trace(scene, accel, i, jitter, r.rng());
     }
-    let keep_direct = keep && reuse.is_some_and(|m| m.direct && s.shadow.is_none_or(|ray| !m.moved.on_ray(&ray)));
+    let keep_direct =
+        settled || keep && reuse.is_some_and(|m| m.direct && s.shadow.is_none_or(|ray| !m.moved.on_ray(&ray)));
     if !keep_direct {
         (s.direct, s.shadow) = direct_light(ctx, &s.sample, r.rng());
         outcome |= if s.shadow.is_some() { SHADOW_RAY } else { 0 };

@@ -231,6 +231,10 @@ pub struct InstantCacheStats {
     /// `temporal`: kept camera samples that also kept their direct light (no shadow ray).
     #[serde(default)]
     pub direct_samples_kept: u64,
+    /// `temporal`: runs of `cameras::RUN` pixels whose samples were kept, direct light too,
+    /// on their run's summary alone, without reading them.
+    #[serde(default)]
+    pub camera_runs_settled: u64,
     pub specular_rays: u64,
     pub shadow_rays: u64,
     pub vpl_ms: f64,

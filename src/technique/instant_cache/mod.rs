@@ -99,6 +99,7 @@ mod rgbe;
 mod temporal;
 mod vpl;
 
+pub use cameras::RUN as CAMERA_RUN;
 pub use config::{
     CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation, DEFAULT_NORMAL_TOLERANCE, DEFAULT_REFINE_TICKS,
     MAX_VPLS,
@@ -111,7 +112,7 @@ use crate::film::Film;
 use crate::scene::edits::SceneDelta;
 use crate::scene::Scene;
 use cache::Cache;
-use cameras::{CameraChange, Reuse, Shaded};
+use cameras::{CameraChange, Reuse, Samples, Shaded};
 use glam::Vec3;
 use pixels::SampleState;
 use rayon::prelude::*;
@@ -152,7 +153,7 @@ pub struct InstantCache {
     kind: TickKind,
     /// `temporal`: each pass's camera samples from the last resident tick, and what may have
     /// changed them since (`cameras.rs`).
-    cameras: Vec<Vec<Shaded>>,
+    cameras: Vec<Samples>,
     /// The stream each of `cameras` drew from: its pass counted from the change before it.
     camera_streams: Vec<u64>,
     camera_change: CameraChange,
@@ -385,9 +386,9 @@ impl InstantCache {
             let mode = self.mode();
             // Only `temporal`'s resident generation keeps its samples for the next tick.
             let resident = mode == CacheMode::Temporal && self.kind == TickKind::Resident;
-            let mut shaded = match self.cameras.get_mut(pass_in_tick).filter(|_| resident) {
+            let mut samples = match self.cameras.get_mut(pass_in_tick).filter(|_| resident) {
                 Some(kept) => std::mem::take(kept),
-                None => Vec::new(),
+                None => Samples::default(),
             };
             let reuse = match &self.camera_change {
                 CameraChange::Moved { moved, lights } if resident => Some(Reuse {
@@ -399,10 +400,12 @@ impl InstantCache {
             let stream = (self.passes, pass_in_tick as u64);
             let t = Instant::now();
             let cameras::Shading { counts, kept } =
-                cameras::shade(ctx, mode, stream, &mut shaded, reuse, self.config.audit);
+                cameras::shade(ctx, mode, stream, &mut samples, reuse, self.config.audit);
+            let shaded = &samples.shaded;
             self.pending.camera_ms += t.elapsed().as_secs_f64() * 1e3;
             self.pending.camera_samples_kept += counts.kept;
             self.pending.direct_samples_kept += counts.direct_kept;
+            self.pending.camera_runs_settled += counts.settled_runs;
             self.pending.audit_cameras_mismatched += counts.mismatched;
             let t = Instant::now();
             let indirect = match self.mode() {
@@ -414,7 +417,7 @@ impl InstantCache {
                     indirect
                 }
                 CacheMode::Static | CacheMode::Temporal => {
-                    self.cached_indirect(ctx, pass_in_tick, (&shaded, &kept), renumbering.as_deref())
+                    self.cached_indirect(ctx, pass_in_tick, (shaded, &kept), renumbering.as_deref())
                 }
             };
             self.pending.indirect_ms += t.elapsed().as_secs_f64() * 1e3;
@@ -422,18 +425,18 @@ impl InstantCache {
                 self.audit(ctx);
             }
             self.pending.camera_rays += shaded.len() as u64 - counts.kept;
-            self.pending.specular_rays += accumulate(film, scene, &shaded, &indirect);
+            self.pending.specular_rays += accumulate(film, scene, shaded, &indirect);
             self.pending.shadow_rays += counts.shadow_rays;
             if resident {
-                self.cameras.resize_with(self.config.spp as usize, Vec::new);
-                self.cameras[pass_in_tick] = shaded;
+                self.cameras.resize_with(self.config.spp as usize, Samples::default);
+                self.cameras[pass_in_tick] = samples;
                 self.camera_streams.resize(self.config.spp as usize, u64::MAX);
                 self.camera_streams[pass_in_tick] = self.passes;
             }
             self.passes += 1;
             film.passes += 1;
         }
-        let bytes = self.cameras.iter().map(|c| c.capacity() * size_of::<Shaded>()).sum::<usize>();
+        let bytes = self.cameras.iter().map(Samples::bytes).sum::<usize>();
         self.pending.memory.set("cameras", bytes as u64);
     }
 }

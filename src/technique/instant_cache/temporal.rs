@@ -41,7 +41,7 @@ use super::vpl::{irradiance_from, ray_origin, visibility_ray, Vpl};
 use crate::embree::{CommittedScene, EmbreeError, Ray};
 use crate::scene::edits::{Aabb, MovedSurface, SceneDelta};
 use crate::scene::{Camera, Scene, SceneAccel, SurfaceId};
-use crate::technique::box_tree::{widened, BoxTree, SphereCone, BOX_SLACK};
+use crate::technique::box_tree::{meets_hull, widened, BoxTree, SphereCone, BOX_SLACK};
 use glam::Vec3;
 use std::sync::Arc;
 
@@ -229,12 +229,23 @@ impl Moved {
         })
     }
 
-    /// May the camera ray through pixel `pixel` (row-major, any point of it) meet a moved
-    /// surface where it is now?
-    pub fn may_show(&self, pixel: usize) -> bool {
+    /// May the camera ray through any point of a pixel of `pixels` (row-major indices) meet a
+    /// moved surface where it is now? Tested with the pixels' bounding rectangle.
+    pub fn may_show(&self, pixels: std::ops::Range<usize>) -> bool {
         let Some(rects) = &self.screen else { return true };
-        let (x, y) = ((pixel % self.width) as f32, (pixel / self.width) as f32);
-        rects.iter().any(|r| x + 1.0 >= r[0] && x <= r[2] && y + 1.0 >= r[1] && y <= r[3])
+        let (Some(last), w) = (pixels.end.checked_sub(1).filter(|&l| l >= pixels.start), self.width.max(1)) else {
+            return false;
+        };
+        let (y0, y1) = (pixels.start / w, last / w);
+        let (x0, x1) = if y0 == y1 { (pixels.start % w, last % w) } else { (0, w - 1) };
+        let (x0, x1, y0, y1) = (x0 as f32, x1 as f32, y0 as f32, y1 as f32);
+        rects.iter().any(|r| x1 + 1.0 >= r[0] && x0 <= r[2] && y1 + 1.0 >= r[1] && y0 <= r[3])
+    }
+
+    /// Is every segment from a point of `from` to a point of `to` clear of every moved
+    /// surface's new and old bounds? (The hull test, exact on the boxes.)
+    pub fn clear_of(&self, from: &Aabb, to: &Aabb) -> bool {
+        !self.new_bounds.iter().chain(&self.old_bounds).any(|b| meets_hull(from, to, b))
     }
 
     /// May a moved surface lie on the segment of `ray`, where it is now or where it was? (A

@@ -230,9 +230,10 @@ impl PixelCache {
                 // a light: inside the hull of the hit and the light, widened by `reach`. The
                 // boxes' union culls first.
                 let around = Aabb { min: hit.p - Vec3::splat(reach), max: hit.p + Vec3::splat(reach) };
+                let point = Aabb { min: hit.p, max: hit.p };
                 let in_a_shadow_ray = |l: &Aabb| {
                     exact.overlaps(&around.union(l))
-                        && moves.boxes.iter().any(|b| meets_hull(hit.p, l, &widened(b, moves.slack + reach)))
+                        && moves.boxes.iter().any(|b| meets_hull(&point, l, &widened(b, moves.slack + reach)))
                 };
                 if moves.lights.iter().any(in_a_shadow_ray) {
                     Fate::DirectStale
