@@ -15,7 +15,8 @@
 //!    material or emitter edit, and no moved object or light shape on or at the end of its ray)
 //!    and traces the rest; a kept sample keeps its direct light too while no light changed and
 //!    no moved surface lies, or lay, on its shadow ray (resident passes draw from a stream of
-//!    the pixel and the pass since the change, so a fresh sample would draw the same).
+//!    the pixel and the pass since the change, so a fresh sample would draw the same). Runs of
+//!    32 pixels whose hits and shadow rays no moved box can reach are kept without being read.
 //! 3. Indirect diffuse light, by mode:
 //!    - `igi` (`igi.rs`): each pixel gathers its n×n-interleaved subset of the VPLs with
 //!      visibility rays, then a discontinuity buffer averages the n×n neighbourhood.
