@@ -1,5 +1,5 @@
-//! Each pass's camera samples with their direct light, and `temporal`'s camera samples kept
-//! from tick to tick.
+//! Each pass's camera samples with their direct light, `temporal`'s camera samples kept from
+//! tick to tick, and their radiance added to the film.
 //!
 //! `temporal` looks through the same sub-pixel point of a pixel every tick, so a camera sample
 //! traced last tick is what a fresh trace finds unless the camera, a material, an emitter or a
@@ -40,11 +40,14 @@ use super::temporal::Moved;
 use super::CacheMode;
 use crate::core::{Rgb, Rng};
 use crate::embree::Ray;
+use crate::film::Film;
 use crate::scene::edits::Aabb;
+use crate::scene::Scene;
 use crate::technique::camera_chain::{self, CameraSample};
 use crate::technique::RenderContext;
 use glam::{Vec2, Vec3};
 use rayon::prelude::*;
+use std::f32::consts::FRAC_1_PI;
 use std::sync::Arc;
 
 /// A pixel's camera sample with its direct light.
@@ -342,4 +345,27 @@ fn direct_light(ctx: &RenderContext, sample: &CameraSample, rng: &mut Rng) -> (R
         Some(hit) => camera_chain::direct_light(ctx.scene, ctx.accel, hit, rng),
         None => (Rgb::BLACK, None),
     }
+}
+
+/// Adds each sample's radiance (the emission along its chain, its direct light and ρ/π times
+/// its indirect irradiance) to its pixel, in parallel rows, and returns the specular rays the
+/// samples' chains traced.
+pub fn accumulate(film: &mut Film, scene: &Scene, shaded: &[Shaded], indirect: &[Option<Rgb>]) -> u64 {
+    film.accumulate_chunks(
+        scene.camera.width as usize,
+        |first, chunk| {
+            let mut specular = 0;
+            for ((px, s), e) in chunk.iter_mut().zip(&shaded[first..]).zip(&indirect[first..]) {
+                let reflected = match (&s.sample.hit, e) {
+                    (Some(hit), Some(e)) => hit.beta * hit.material(scene).diffuse_reflectance() * *e * FRAC_1_PI,
+                    _ => Rgb::BLACK,
+                };
+                px.add(s.sample.emitted + s.direct + reflected);
+                px.count += 1.0;
+                specular += s.sample.specular_rays;
+            }
+            specular
+        },
+        |a, b| a + b,
+    )
 }

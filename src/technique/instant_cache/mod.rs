@@ -117,7 +117,6 @@ use cameras::{CameraChange, Reuse, Samples, Shaded};
 use glam::Vec3;
 use pixels::SampleState;
 use rayon::prelude::*;
-use std::f32::consts::FRAC_1_PI;
 use std::sync::Arc;
 use std::time::Instant;
 use temporal::{Moved, Refresh, TickChanges};
@@ -426,7 +425,7 @@ impl InstantCache {
                 self.audit(ctx);
             }
             self.pending.camera_rays += shaded.len() as u64 - counts.kept;
-            self.pending.specular_rays += accumulate(film, scene, shaded, &indirect);
+            self.pending.specular_rays += cameras::accumulate(film, scene, shaded, &indirect);
             self.pending.shadow_rays += counts.shadow_rays;
             if resident {
                 self.cameras.resize_with(self.config.spp as usize, Samples::default);
@@ -440,29 +439,6 @@ impl InstantCache {
         let bytes = self.cameras.iter().map(Samples::bytes).sum::<usize>();
         self.pending.memory.set("cameras", bytes as u64);
     }
-}
-
-/// Adds each sample's radiance (the emission along its chain, its direct light and ρ/π times
-/// its indirect irradiance) to its pixel, in parallel rows, and returns the specular rays the
-/// samples' chains traced.
-fn accumulate(film: &mut Film, scene: &Scene, shaded: &[Shaded], indirect: &[Option<Rgb>]) -> u64 {
-    film.accumulate_chunks(
-        scene.camera.width as usize,
-        |first, chunk| {
-            let mut specular = 0;
-            for ((px, s), e) in chunk.iter_mut().zip(&shaded[first..]).zip(&indirect[first..]) {
-                let reflected = match (&s.sample.hit, e) {
-                    (Some(hit), Some(e)) => hit.beta * hit.material(scene).diffuse_reflectance() * *e * FRAC_1_PI,
-                    _ => Rgb::BLACK,
-                };
-                px.add(s.sample.emitted + s.direct + reflected);
-                px.count += 1.0;
-                specular += s.sample.specular_rays;
-            }
-            specular
-        },
-        |a, b| a + b,
-    )
 }
 
 /// Computes the records made this pass (from `first_new` on) and re-evaluates flagged
