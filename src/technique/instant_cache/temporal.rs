@@ -230,16 +230,9 @@ impl Moved {
     }
 
     /// May the camera ray through any point of a pixel of `pixels` (row-major indices) meet a
-    /// moved surface where it is now? Tested with the pixels' bounding rectangle.
+    /// moved surface where it is now?
     pub fn may_show(&self, pixels: std::ops::Range<usize>) -> bool {
-        let Some(rects) = &self.screen else { return true };
-        let (Some(last), w) = (pixels.end.checked_sub(1).filter(|&l| l >= pixels.start), self.width.max(1)) else {
-            return false;
-        };
-        let (y0, y1) = (pixels.start / w, last / w);
-        let (x0, x1) = if y0 == y1 { (pixels.start % w, last % w) } else { (0, w - 1) };
-        let (x0, x1, y0, y1) = (x0 as f32, x1 as f32, y0 as f32, y1 as f32);
-        rects.iter().any(|r| x1 + 1.0 >= r[0] && x0 <= r[2] && y1 + 1.0 >= r[1] && y0 <= r[3])
+        self.screen.as_ref().is_none_or(|rects| meets_rects(rects, self.width, pixels))
     }
 
     /// Is every segment from a point of `from` to a point of `to` clear of every moved
@@ -253,6 +246,19 @@ impl Moved {
     pub fn on_ray(&self, ray: &Ray) -> bool {
         self.swept_boxes.hits(ray.origin, ray.dir, ray.tfar).0
     }
+}
+
+/// Does the bounding rectangle of `pixels` (row-major indices into rows `width` wide) meet one
+/// of `rects` (film rectangles, `[x0, y0, x1, y1]` in pixels)? A pixel (x, y) covers [x, x + 1)
+/// × [y, y + 1); pixels on several rows are bounded by whole rows.
+fn meets_rects(rects: &[[f32; 4]], width: usize, pixels: std::ops::Range<usize>) -> bool {
+    let (Some(last), w) = (pixels.end.checked_sub(1).filter(|&l| l >= pixels.start), width.max(1)) else {
+        return false;
+    };
+    let (y0, y1) = (pixels.start / w, last / w);
+    let (x0, x1) = if y0 == y1 { (pixels.start % w, last % w) } else { (0, w - 1) };
+    let (x0, x1, y0, y1) = (x0 as f32, x1 as f32, y0 as f32, y1 as f32);
+    rects.iter().any(|r| x1 + 1.0 >= r[0] && x0 <= r[2] && y1 + 1.0 >= r[1] && y0 <= r[3])
 }
 
 /// The film rectangle a box projects into, widened by a pixel; `None` when a corner is not in
@@ -504,6 +510,34 @@ impl Cones {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_run_of_pixels_meets_a_rectangle_when_one_of_its_pixels_does() {
+        // Property: a run of pixels meets a film rectangle if any of its pixels does (so a run
+        // that does not needs none of its pixels tested), and within one row exactly then.
+        // Checked against the pixels one by one, on random rectangles and runs, some across
+        // rows. Negative control, by hand: bounding a run by its first pixel's column alone
+        // fails the first assertion.
+        let mut rng = crate::core::Rng::new(7, 8);
+        let (width, height) = (37usize, 23usize);
+        let (mut met, mut missed) = (0, 0);
+        for _ in 0..3000 {
+            let mut u = |s: f32| rng.next_f32() * s;
+            let (x, y) = (u(width as f32 + 6.0) - 3.0, u(height as f32 + 6.0) - 3.0);
+            let rects = [[x, y, x + u(16.0), y + u(10.0)]];
+            let start = (u((width * height) as f32) as usize).min(width * height - 1);
+            let len = 1 + u(if start % 3 == 0 { 80.0 } else { 20.0 }) as usize;
+            let run = start..(start + len).min(width * height);
+            let any = run.clone().any(|i| meets_rects(&rects, width, i..i + 1));
+            let whole = meets_rects(&rects, width, run.clone());
+            assert!(whole || !any, "{run:?} has a pixel in {rects:?}, but the run does not meet it");
+            if run.start / width == (run.end - 1) / width {
+                assert_eq!(whole, any, "{run:?} lies in one row: exact against {rects:?}");
+            }
+            (met, missed) = (met + usize::from(any), missed + usize::from(!whole));
+        }
+        assert!(met > 300 && missed > 300, "too few runs on either side: {met} met, {missed} missed");
+    }
 
     #[test]
     fn a_box_in_front_of_the_camera_projects_inside_its_film_rectangle() {
