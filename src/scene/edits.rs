@@ -56,11 +56,20 @@ pub struct Aabb {
 }
 
 impl Aabb {
+    /// The box of no points: `union` and `with` leave the other operand as it is.
+    pub const EMPTY: Aabb = Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY };
+
     pub fn of_points(points: impl IntoIterator<Item = Vec3>) -> Aabb {
-        points.into_iter().fold(Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY }, |b, p| Aabb {
-            min: b.min.min(p),
-            max: b.max.max(p),
-        })
+        points.into_iter().fold(Aabb::EMPTY, |b, p| b.with(p))
+    }
+
+    /// This box grown to hold `p`.
+    pub fn with(&self, p: Vec3) -> Aabb {
+        Aabb { min: self.min.min(p), max: self.max.max(p) }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.min.x > self.max.x
     }
 
     pub fn union(&self, o: &Aabb) -> Aabb {

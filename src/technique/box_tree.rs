@@ -55,10 +55,7 @@ impl BoxTree {
             return;
         }
         let centre = |b: &Aabb| (b.min + b.max) * 0.5;
-        let spread = boxes.iter().fold(Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY }, |a, b| Aabb {
-            min: a.min.min(centre(b)),
-            max: a.max.max(centre(b)),
-        });
+        let spread = Aabb::of_points(boxes.iter().map(centre));
         let extent = spread.max - spread.min;
         let axis = if extent.x >= extent.y && extent.x >= extent.z {
             0

@@ -45,7 +45,7 @@ use crate::scene::edits::Aabb;
 use crate::scene::Scene;
 use crate::technique::camera_chain::{self, CameraSample};
 use crate::technique::RenderContext;
-use glam::{Vec2, Vec3};
+use glam::Vec2;
 use rayon::prelude::*;
 use std::f32::consts::FRAC_1_PI;
 use std::sync::Arc;
@@ -90,31 +90,23 @@ struct RunBounds {
     misses: bool,
 }
 
-const EMPTY: Aabb = Aabb { min: Vec3::INFINITY, max: Vec3::NEG_INFINITY };
-
-fn is_empty(b: &Aabb) -> bool {
-    b.min.x > b.max.x
-}
-
 impl RunBounds {
     /// A run not summarised yet: never skipped.
-    const UNKNOWN: RunBounds = RunBounds { from: EMPTY, to: EMPTY, never: true, misses: true };
+    const UNKNOWN: RunBounds = RunBounds { from: Aabb::EMPTY, to: Aabb::EMPTY, never: true, misses: true };
 
     /// The summary of `run`'s samples.
     fn of(run: &[Shaded]) -> RunBounds {
-        let grow = |b: &mut Aabb, p: Vec3| *b = Aabb { min: b.min.min(p), max: b.max.max(p) };
-        let mut r = RunBounds { from: EMPTY, to: EMPTY, never: false, misses: false };
+        let mut r = RunBounds { from: Aabb::EMPTY, to: Aabb::EMPTY, never: false, misses: false };
         for s in run {
             r.never |= s.sample.specular_rays > 0 || !s.sample.emitted.is_black();
             match &s.sample.hit {
-                Some(hit) => grow(&mut r.from, hit.p),
+                Some(hit) => r.from = r.from.with(hit.p),
                 None => r.misses = true,
             }
             if let Some(ray) = &s.shadow {
                 let end = ray.origin + ray.dir * ray.tfar;
                 r.never |= !end.is_finite();
-                grow(&mut r.from, ray.origin);
-                grow(&mut r.to, end);
+                (r.from, r.to) = (r.from.with(ray.origin), r.to.with(end));
             }
         }
         r
@@ -128,10 +120,10 @@ impl RunBounds {
             return false;
         }
         // No hit and no shadow ray: nothing a moved surface could touch.
-        if is_empty(&self.from) {
+        if self.from.is_empty() {
             return true;
         }
-        let to = if is_empty(&self.to) { &self.from } else { &self.to };
+        let to = if self.to.is_empty() { &self.from } else { &self.to };
         moved.clear_of(&self.from, to)
     }
 }
