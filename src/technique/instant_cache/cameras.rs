@@ -65,14 +65,19 @@ pub const SHADED_BYTES: u64 = (std::mem::size_of::<Shaded>() + std::mem::size_of
 /// Pixels in a run, the unit a tick skips (the last run of the image may be shorter).
 pub const RUN: usize = 32;
 
-/// One pass's camera samples, by pixel, and their runs' summaries, kept from tick to tick.
+/// One pass's camera samples, by pixel, and their runs' summaries, kept from tick to tick. Only
+/// [`shade`] writes them, so there is always one summary per run of the samples.
 #[derive(Default)]
 pub struct Samples {
-    pub shaded: Vec<Shaded>,
+    shaded: Vec<Shaded>,
     runs: Vec<RunBounds>,
 }
 
 impl Samples {
+    pub fn shaded(&self) -> &[Shaded] {
+        &self.shaded
+    }
+
     /// Bytes held.
     pub fn bytes(&self) -> usize {
         self.shaded.capacity() * std::mem::size_of::<Shaded>() + self.runs.capacity() * std::mem::size_of::<RunBounds>()
@@ -228,7 +233,7 @@ pub fn shade(
     let scene = ctx.scene;
     let pixels = (scene.camera.width * scene.camera.height) as usize;
     let runs = pixels.div_ceil(RUN);
-    let reuse = reuse.filter(|_| samples.shaded.len() == pixels && samples.runs.len() == runs);
+    let reuse = reuse.filter(|_| samples.shaded.len() == pixels);
     samples.shaded.resize(pixels, Shaded::default());
     samples.runs.resize(runs, RunBounds::UNKNOWN);
     let mut outcomes = vec![0u8; pixels];

@@ -401,7 +401,7 @@ impl InstantCache {
             let t = Instant::now();
             let cameras::Shading { counts, kept } =
                 cameras::shade(ctx, mode, stream, &mut samples, reuse, self.config.audit);
-            let shaded = &samples.shaded;
+            let shaded = samples.shaded();
             self.pending.camera_ms += t.elapsed().as_secs_f64() * 1e3;
             self.pending.camera_samples_kept += counts.kept;
             self.pending.direct_samples_kept += counts.direct_kept;
