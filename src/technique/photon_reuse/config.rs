@@ -69,8 +69,8 @@ pub const MAX_RADIUS_SHARE: f32 = 0.1;
 
 impl PhotonReuseConfig {
     /// Resident memory on `scene` at `pixels` pixels (`budget.rs`): the path store, the photon
-    /// grid (every photon in it, and one cell per `gather_photons / 4` photons, a cell being
-    /// 2r wide where a disc of radius r holds `gather_photons`) and the kept pixels. Also refuses
+    /// grid (every photon in it, and one cell per `gather_photons / 4` photons: a cell is r
+    /// wide, and a disc of radius r holds `gather_photons`) and the kept pixels. Also refuses
     /// a `radius` wider than [`MAX_RADIUS_SHARE`] of the scene's diagonal.
     pub fn resident_estimate(&self, scene: &Scene, pixels: u64) -> Result<MemoryEstimate, TechniqueError> {
         if let Some(r) = self.radius {

@@ -11,7 +11,7 @@
 //! The sum is kept apart from its 1/(π r²) so that photons can later be splatted into it, one
 //! term at a time: the estimate is linear in the photons.
 //! The paper splats photons in screen space on a GPU; on the CPU a gather through a spatial
-//! grid (`grid.rs`: cell size 2r, so a query visits at most 8 cells) is the natural
+//! grid (`grid.rs`: cells r wide, so a query visits at most 27) is the natural
 //! equivalent for a whole frame, and a splat into the kept pixels for a change.
 use super::grid::PhotonGrid;
 use crate::core::{Rgb, Rng};

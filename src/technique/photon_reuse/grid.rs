@@ -3,8 +3,12 @@
 //!
 //! It holds every stored photon from the second bounce on (row ≥ 1) that lies on a diffuse
 //! surface (the first hit of a path is direct light, which NEE counts). Cells are cubes of side
-//! 2r, so a gather of radius r visits at most 2×2×2 of them; only occupied cells exist (a hash
-//! map from cell coordinates), so memory follows the photons, not the scene's extent.
+//! r (the radius the grid is built with), so a gather of radius r visits at most 3×3×3 of them
+//! and reads the photons of about (3r)² of a surface for the π r² it keeps, against (4r)² with
+//! cells 2r wide and 2×2×2 visits: `bench reuse` measured a full render 24% faster with side r
+//! than 2r, and slower with 1.5r or 0.7r (docs/benchmarks.md, stop 57). Only occupied cells
+//! exist (a hash map from cell coordinates), so memory follows the photons, not the scene's
+//! extent.
 //!
 //! Invariants, which make an updated grid equal to one built from scratch, photon for photon
 //! and bit for bit in what it returns:
@@ -139,7 +143,7 @@ fn by_slot<T: Copy>(items: &[(u32, T)], slots: usize) -> Vec<(u32, T)> {
     out
 }
 
-/// A cheap hash for cell coordinates (the gather looks up eight per query).
+/// A cheap hash for cell coordinates (the gather looks up to 27 per query).
 #[derive(Default)]
 pub struct CellHasher(u64);
 
@@ -175,7 +179,7 @@ pub struct GridUpdate {
 #[derive(Clone, Debug, Default)]
 pub struct PhotonGrid {
     pub radius: f32,
-    /// 1 / the cell side (2r).
+    /// 1 / the cell side (the radius the grid was built with).
     pub inv_cell: f32,
     /// B: photons per path, the stride of keys.
     rows: u32,
@@ -243,7 +247,7 @@ impl PhotonGrid {
     /// parallel; the result does not depend on the thread count.
     pub fn build(scene: &Scene, store: &PathStore, radius: f32) -> PhotonGrid {
         let diffuse = diffuse_objects(scene);
-        let inv_cell = 1.0 / (2.0 * radius);
+        let inv_cell = 1.0 / radius;
         let mut all: Vec<GridPhoton> = Vec::new();
         for row in 1..store.rows.len() {
             all.par_extend(

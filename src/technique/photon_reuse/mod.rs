@@ -144,7 +144,7 @@ pub struct PhotonReuse {
     /// Distribution maps of lights that have moved at least once.
     maps: Vec<Option<MappedLight>>,
     grid: PhotonGrid,
-    /// r₀: the gather radius chosen at the first tick (the grid's cells are 2r₀ wide).
+    /// r₀: the gather radius chosen at the first tick (the grid's cells are r₀ wide).
     base_radius: f32,
     /// Still ticks refined since the last change (k of the radius schedule), r_k / r₀, and
     /// where the next refinement's slice of paths starts.

@@ -5,7 +5,7 @@
 //! On walker (1M paths, about 60k photons changed a tick) this took the splat from about 20 to
 //! 14 ms a tick (`docs/benchmarks.md`).
 //!
-//! The splat asks for cells 2r wide, the photon grid's: a pixel's query reaches r plus its
+//! The splat asks for cells 2r wide: a pixel's query reaches r plus its
 //! footprint, about 2r there, so it reads at most 3 × 3 × 3 cells; cells r wide measured no
 //! faster. A block that would exceed [`MAX_CELLS`] (photons scattered far apart) doubles its
 //! cell width until it fits, so its memory stays bounded; the answers do not depend on the
