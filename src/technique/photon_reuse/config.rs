@@ -69,9 +69,10 @@ pub const MAX_RADIUS_SHARE: f32 = 0.1;
 
 impl PhotonReuseConfig {
     /// Resident memory on `scene` at `pixels` pixels (`budget.rs`): the path store, the photon
-    /// grid (every photon in it, and one cell per `gather_photons / 4` photons: a cell is r
-    /// wide, and a disc of radius r holds `gather_photons`) and the kept pixels. Also refuses
-    /// a `radius` wider than [`MAX_RADIUS_SHARE`] of the scene's diagonal.
+    /// grid (every photon in it, and one cell per `gather_photons / 4` photons: cells are r
+    /// wide, so a surface crossing one holds about r² of the πr² that holds `gather_photons`)
+    /// and the kept pixels. Also refuses a `radius` wider than [`MAX_RADIUS_SHARE`] of the
+    /// scene's diagonal.
     pub fn resident_estimate(&self, scene: &Scene, pixels: u64) -> Result<MemoryEstimate, TechniqueError> {
         if let Some(r) = self.radius {
             let diagonal = scene.bounds().map_or(0.0, |(lo, hi)| (hi - lo).length());

@@ -480,10 +480,45 @@ impl PhotonGrid {
 
 #[cfg(test)]
 mod tests {
-    use super::PhotonGrid;
+    use super::{add, PhotonGrid};
+    use crate::core::Rng;
     use crate::embree::Device;
     use crate::technique::photon_reuse::test_scenes::CornellRun;
     use crate::technique::photon_reuse::ReuseMode;
+    use glam::Vec3;
+
+    #[test]
+    fn a_gather_sums_every_photon_within_its_radius() {
+        // Property: a gather equals the sum of `GridPhoton::term` over every photon in the grid
+        // (the same f32 terms in another order, summed in f64: equal up to rounding), at
+        // queries on and beside the photons' surfaces, seen from either side. Negative control,
+        // by hand: visiting one cell fewer per axis (`hi - 1` in `gather_sum`) fails it.
+        let device = Device::new(2).expect("device");
+        let mut run = CornellRun::new(&device, ReuseMode::Naive);
+        run.update(0, 3);
+        let (grid, scene) = (&run.technique.grid, &run.scene);
+        let photons: Vec<_> = grid.cells.iter().flat_map(|c| &c.photons).collect();
+        let material = scene.materials.iter().find(|m| !m.is_specular()).expect("a diffuse material");
+        let r2 = grid.radius * grid.radius;
+        let mut rng = Rng::new(11, 12);
+        let mut lit = 0;
+        for k in 0..300 {
+            let at = photons[(rng.next_f32() * photons.len() as f32) as usize % photons.len()];
+            let mut u = || rng.next_f32() - 0.5;
+            let p = at.position + Vec3::new(u(), u(), u()) * (2.5 * grid.radius);
+            let n = at.facing;
+            let wo = ((if k % 3 == 0 { -n } else { n }) + Vec3::new(u(), u(), u())).normalize();
+            let n_side = if n.dot(wo) >= 0.0 { n } else { -n };
+            let brute = photons.iter().filter_map(|q| q.term(material, p, n, wo, n_side, r2)).fold([0.0; 3], add);
+            let gathered = grid.gather_sum(material, p, n, wo);
+            for c in 0..3 {
+                let close = (gathered[c] - brute[c]).abs() <= 1e-9 * brute[c].abs().max(1e-6);
+                assert!(close, "query {k} at {p:?}: gathered {gathered:?}, every photon {brute:?}");
+            }
+            lit += usize::from(brute[0] > 0.0);
+        }
+        assert!(lit > 100, "too few queries with photons near them: {lit} of 300");
+    }
 
     #[test]
     fn an_updated_grid_equals_a_rebuilt_one() {

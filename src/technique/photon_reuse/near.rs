@@ -5,11 +5,11 @@
 //! On walker (1M paths, about 60k photons changed a tick) this took the splat from about 20 to
 //! 14 ms a tick (`docs/benchmarks.md`).
 //!
-//! The splat asks for cells 2r wide: a pixel's query reaches r plus its
-//! footprint, about 2r there, so it reads at most 3 × 3 × 3 cells; cells r wide measured no
-//! faster. A block that would exceed [`MAX_CELLS`] (photons scattered far apart) doubles its
-//! cell width until it fits, so its memory stays bounded; the answers do not depend on the
-//! width. Units: scene units; signs are −1 for a photon taken out and +1 for one put in.
+//! The splat asks for cells 2r wide: a pixel's query reaches r plus its footprint, about 2r
+//! there, so it reads at most 3 × 3 × 3 cells; cells r wide measured no faster. A block that
+//! would exceed [`MAX_CELLS`] (photons scattered far apart) doubles its cell width until it
+//! fits, so its memory stays bounded; the answers do not depend on the width. Units: scene
+//! units; signs are −1 for a photon taken out and +1 for one put in.
 use super::grid::{cell_of, GridPhoton};
 use glam::Vec3;
 
