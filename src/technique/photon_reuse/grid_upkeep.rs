@@ -47,10 +47,11 @@ impl PhotonReuse {
     }
 
     /// Picks the gather radius (r₀, fixed after the first tick) and rebuilds the photon grid.
+    /// The first pick needs only the number of photons the grid will hold, which is counted
+    /// without building a grid (a throwaway grid of unit cells took as long as the real one:
+    /// `docs/benchmarks.md`, stop 58).
     pub(super) fn rebuild_grid(&mut self, scene: &Scene, store: &PathStore) {
         let t = Instant::now();
-        let radius = if self.base_radius > 0.0 { self.base_radius } else { 1.0 };
-        let first = PhotonGrid::build(scene, store, radius);
         let radius = match self.config.radius {
             Some(r) => r,
             None if self.base_radius > 0.0 => self.base_radius,
@@ -61,10 +62,11 @@ impl PhotonReuse {
                     .filter(|o| !scene.materials[o.material as usize].is_specular())
                     .map(|o| o.area)
                     .sum();
-                (self.config.gather_photons as f32 * area / (std::f32::consts::PI * first.len().max(1) as f32)).sqrt()
+                let photons = PhotonGrid::count(scene, store);
+                (self.config.gather_photons as f32 * area / (std::f32::consts::PI * photons.max(1) as f32)).sqrt()
             }
         };
-        self.grid = if radius == first.radius { first } else { PhotonGrid::build(scene, store, radius) };
+        self.grid = PhotonGrid::build(scene, store, radius);
         self.base_radius = radius;
         self.grid.radius = radius * self.shrink;
         self.pending.grid_ms = ms(t);
