@@ -536,10 +536,9 @@ mod tests {
     #[test]
     fn the_count_that_picks_the_radius_is_the_photons_a_grid_holds() {
         // Property: `PhotonGrid::count`, which picks the first radius without building a grid,
-        // equals the number of photons the built grid holds, after the first tick and after
-        // each of three ticks that moved an object and a light (paths of every length, photons on the
-        // mirror left out). Negative control, by hand: counting from row 0 (direct light)
-        // fails it.
+        // equals the number of photons the built grid holds: after the first tick, and after
+        // three ticks that move the block (and, at the third, the light), with paths of every
+        // length. Negative control, by hand: counting from row 0 (direct light) fails it.
         let device = Device::new(2).expect("device");
         let mut run = CornellRun::new(&device, ReuseMode::Error);
         for tick in 0..4 {
