@@ -30,6 +30,14 @@ pub struct PhotonRow {
 }
 
 impl PhotonRow {
+    /// Stores `p` as this row's photon of `path`.
+    pub fn put(&mut self, path: usize, p: StoredPhoton) {
+        self.position[path] = p.position;
+        self.incoming[path] = p.incoming;
+        self.surface[path] = p.surface;
+        self.power[path] = p.power;
+    }
+
     /// Bytes per photon: position, packed incoming direction, surface id and power.
     pub const BYTES_PER_PHOTON: u64 = (std::mem::size_of::<Vec3>()
         + std::mem::size_of::<PackedDir>()
@@ -255,11 +263,7 @@ impl PathStore {
 
     /// Writes photon `p` into row `row` of path `path`.
     pub fn put(&mut self, row: usize, path: usize, p: StoredPhoton) {
-        let r = &mut self.rows[row];
-        r.position[path] = p.position;
-        r.incoming[path] = p.incoming;
-        r.surface[path] = p.surface;
-        r.power[path] = p.power;
+        self.rows[row].put(path, p);
     }
 
     /// Gives light l the next `counts[l]` paths, in light order. Paths beyond the counts' sum

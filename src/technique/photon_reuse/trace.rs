@@ -11,6 +11,7 @@ use crate::core::{offset_ray_origin, PackedDir, Rgb, Rng};
 use crate::embree::Ray;
 use crate::scene::{Normals, Scene, SceneAccel, SurfaceId, Transport};
 use glam::Vec3;
+use rayon::prelude::*;
 
 /// Separates photon random streams from camera streams keyed by the same numbers.
 const PHOTON_STREAM: u64 = 0x5048_4f54_4f4e; // "PHOTON"
@@ -291,26 +292,40 @@ pub fn put_photon(store: &mut PathStore, row: usize, path: usize, p: &Photon) {
     store.put(row, path, pack(store, p));
 }
 
-/// Writes traced tails back into the store.
+/// Writes traced tails back into the store: each photon row on a worker of its own, beside the
+/// paths' own fields. The retrace ran in parallel, and writing its tails on one thread took 70–177
+/// ms of walker's 460–750 ms full retrace (`docs/benchmarks.md`, stop 58).
 pub fn write_back(store: &mut PathStore, tails: Vec<TracedTail>) {
-    for t in tails {
-        let i = t.path;
-        if let Some(c) = t.cell {
-            store.word[i] = store.word[i].with_cell(c);
-        }
-        debug_assert!(store.word[i].replace(), "path {i} traced without being marked");
-        if let Some((o, d, p)) = t.emission {
-            store.word[i] = store.word[i].with_reused_light(false);
-            if let Some(origins) = &mut store.origin {
-                origins[i] = o;
+    let PathStore { rows, word, origin, emit_dir, emit_power, escape, .. } = store;
+    let tails = &tails;
+    rayon::join(
+        || {
+            rows.par_iter_mut().enumerate().for_each(|(k, row)| {
+                for t in tails {
+                    if let Some(&p) = (k as u32).checked_sub(t.from).and_then(|j| t.photons.get(j as usize)) {
+                        row.put(t.path, p);
+                    }
+                }
+            })
+        },
+        || {
+            for t in tails {
+                let i = t.path;
+                if let Some(c) = t.cell {
+                    word[i] = word[i].with_cell(c);
+                }
+                debug_assert!(word[i].replace(), "path {i} traced without being marked");
+                if let Some((o, d, p)) = t.emission {
+                    word[i] = word[i].with_reused_light(false);
+                    if let Some(origins) = origin {
+                        origins[i] = o;
+                    }
+                    emit_dir[i] = d;
+                    emit_power[i] = p;
+                }
+                word[i] = word[i].cleared().with_photons(t.from + t.photons.len() as u32);
+                escape[i] = t.escape;
             }
-            store.emit_dir[i] = d;
-            store.emit_power[i] = p;
-        }
-        for (k, &ph) in t.photons.iter().enumerate() {
-            store.put(t.from as usize + k, i, ph);
-        }
-        store.word[i] = store.word[i].cleared().with_photons(t.from + t.photons.len() as u32);
-        store.escape[i] = t.escape;
-    }
+        },
+    );
 }
