@@ -76,10 +76,13 @@ impl BoxTree {
 
     /// Does the segment touch any box? Returns the answer and the box and node tests made.
     pub fn hits(&self, origin: Vec3, dir: Vec3, t_max: f32) -> (bool, u64) {
-        if self.nodes.is_empty() {
-            return (false, 0);
-        }
-        let segment = Segment::new(origin, dir, t_max);
+        self.hits_below(0, &Segment::new(origin, dir, t_max))
+    }
+
+    /// Does the segment touch a box below node `root` (a [`CoverBox`]'s node, or 0 for all)?
+    /// Returns the answer and the box and node tests made.
+    pub fn hits_below(&self, root: u32, segment: &Segment) -> (bool, u64) {
+        let Some(&root_node) = self.nodes.get(root as usize) else { return (false, 0) };
         let touches = |b: &Aabb| segment.touches(b);
         let leaf = |n: &BoxNode| {
             let boxes = &self.boxes[n.first as usize..(n.first + n.count) as usize];
@@ -87,10 +90,10 @@ impl BoxTree {
             (met.is_some(), met.map_or(boxes.len(), |k| k + 1) as u64)
         };
         // A tree of one leaf (one or two moved boxes, the common case) needs no stack.
-        if self.nodes[0].count > 0 {
-            return leaf(&self.nodes[0]);
+        if root_node.count > 0 {
+            return leaf(&root_node);
         }
-        let mut stack = [0u32; 64];
+        let mut stack = [root; 64];
         let mut top = 1;
         let mut tests = 0u64;
         while top > 0 {
@@ -119,13 +122,22 @@ impl BoxTree {
     }
 }
 
+/// One box of a [`BoxTree::cover`]: a moved box itself (`below` is `None`), or the bounds of
+/// the tree node `below`, whose boxes a segment that touches it must still be tested against
+/// ([`BoxTree::hits_below`]).
+#[derive(Clone, Copy, Debug)]
+pub struct CoverBox {
+    pub bounds: Aabb,
+    pub below: Option<u32>,
+}
+
 impl BoxTree {
     /// At most `n` boxes (n ≥ 1) that together cover every box: the boxes themselves when there
-    /// are no more than `n`, otherwise the bounds of the tree's top nodes, opened widest first.
-    /// A segment that touches a box touches the cover, so the cover is a conservative pre-test.
-    pub fn cover(&self, n: usize) -> Vec<Aabb> {
+    /// are no more than `n`, otherwise the tree's top nodes, opened widest first. A segment that
+    /// touches a box touches the cover, so the cover is a conservative pre-test.
+    pub fn cover(&self, n: usize) -> Vec<CoverBox> {
         if self.boxes.len() <= n {
-            return self.boxes.clone();
+            return self.boxes.iter().map(|&bounds| CoverBox { bounds, below: None }).collect();
         }
         let extent = |i: u32| {
             let b = self.nodes[i as usize].bounds;
@@ -139,7 +151,7 @@ impl BoxTree {
             front[at] = first;
             front.push(first + 1);
         }
-        front.iter().map(|&i| self.nodes[i as usize].bounds).collect()
+        front.iter().map(|&i| CoverBox { bounds: self.nodes[i as usize].bounds, below: Some(i) }).collect()
     }
 
     /// Does any box overlap `query` (touching counts)?
