@@ -272,15 +272,25 @@ impl PixelCache {
                 let (material, side) = (hit.material(scene), hit.facing());
                 let (mut touched, mut terms) = (false, 0);
                 near.around(hit.p, within, |positions, photons| {
-                    for (q, (photon, sign)) in positions.iter().zip(photons) {
-                        if (*q - hit.p).length_squared() > within * within {
-                            continue;
+                    // Distances first, for 32 photons at a time without a branch (about a third
+                    // are within reach: a branch per photon mispredicts), then the terms of the
+                    // photons within r, in order.
+                    for (qs, ps) in positions.chunks(32).zip(photons.chunks(32)) {
+                        let (mut reached, mut in_r) = (0u32, 0u32);
+                        for (j, q) in qs.iter().enumerate() {
+                            let d2 = (*q - hit.p).length_squared();
+                            reached |= u32::from(d2 <= within * within) << j;
+                            in_r |= u32::from(d2 <= r2) << j;
                         }
-                        touched = true;
-                        if let Some(t) = photon.term(material, hit.p, hit.n, hit.wo, side, r2) {
-                            let i = &mut s.indirect;
-                            *i = [i[0] + t.r as f64 * sign, i[1] + t.g as f64 * sign, i[2] + t.b as f64 * sign];
-                            terms += 1;
+                        touched |= reached != 0;
+                        while in_r != 0 {
+                            let (photon, sign) = &ps[in_r.trailing_zeros() as usize];
+                            in_r &= in_r - 1;
+                            if let Some(t) = photon.term(material, hit.p, hit.n, hit.wo, side, r2) {
+                                let i = &mut s.indirect;
+                                *i = [i[0] + t.r as f64 * sign, i[1] + t.g as f64 * sign, i[2] + t.b as f64 * sign];
+                                terms += 1;
+                            }
                         }
                     }
                 });
