@@ -51,8 +51,19 @@ impl GridPhoton {
     /// `n_side` facing `wo`): f_r·Φ if it lies within √`r2` on a surface facing the same way,
     /// else nothing. The estimate is Σ terms / (π r²); a gather and a splat share this.
     pub fn term(&self, material: &Material, p: Vec3, n: Vec3, wo: Vec3, n_side: Vec3, r2: f32) -> Option<Rgb> {
-        ((self.position - p).length_squared() <= r2 && self.facing.dot(n_side) > FACING_COSINE)
-            .then(|| material.eval(Normals::flat(n), wo, self.facing, Transport::Radiance) * self.power)
+        self.counts(p, n_side, r2).then(|| self.value(material, n, wo))
+    }
+
+    /// Whether this photon has a term at `p` (see [`GridPhoton::term`]); without a branch.
+    #[inline]
+    fn counts(&self, p: Vec3, n_side: Vec3, r2: f32) -> bool {
+        ((self.position - p).length_squared() <= r2) & (self.facing.dot(n_side) > FACING_COSINE)
+    }
+
+    /// The term of a photon that [`GridPhoton::counts`].
+    #[inline]
+    fn value(&self, material: &Material, n: Vec3, wo: Vec3) -> Rgb {
+        material.eval(Normals::flat(n), wo, self.facing, Transport::Radiance) * self.power
     }
 }
 
@@ -472,9 +483,16 @@ impl PhotonGrid {
             for y in lo.y..=hi.y {
                 for x in lo.x..=hi.x {
                     let Some(&slot) = self.index.get(&[x, y, z]) else { continue };
-                    for ph in &self.cells[slot as usize].photons {
-                        if let Some(t) = ph.term(material, p, n, wo, n_side, r2) {
-                            sum = add(sum, t);
+                    // Which photons count, 32 at a time without a branch (a branch per photon
+                    // mispredicts), then their terms in order.
+                    for photons in self.cells[slot as usize].photons.chunks(32) {
+                        let mut counted = 0u32;
+                        for (j, ph) in photons.iter().enumerate() {
+                            counted |= u32::from(ph.counts(p, n_side, r2)) << j;
+                        }
+                        while counted != 0 {
+                            sum = add(sum, photons[counted.trailing_zeros() as usize].value(material, n, wo));
+                            counted &= counted - 1;
                         }
                     }
                 }
