@@ -60,9 +60,9 @@ impl CornellRun {
         CornellRun { scene, accel, technique }
     }
 
-    /// Applies tick `tick`'s edits (none on tick 0), commits them and updates the technique.
-    pub fn update(&mut self, tick: u32, seed: u64) {
-        use crate::technique::Technique;
+    /// Applies tick `tick`'s edits (none on tick 0) to the scene and commits them, without
+    /// telling the technique.
+    pub fn apply_edits(&mut self, tick: u32) -> crate::scene::edits::SceneDelta {
         let delta = match tick {
             0 => crate::scene::edits::SceneDelta::default(),
             _ => {
@@ -72,6 +72,13 @@ impl CornellRun {
         };
         let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
         self.accel.update_instances(&self.scene, &moved).expect("commit");
+        delta
+    }
+
+    /// Applies tick `tick`'s edits (none on tick 0), commits them and updates the technique.
+    pub fn update(&mut self, tick: u32, seed: u64) {
+        use crate::technique::Technique;
+        let delta = self.apply_edits(tick);
         let ctx = crate::technique::RenderContext { scene: &self.scene, accel: &self.accel, seed, tick: tick as u64 };
         self.technique.update(&ctx, &delta).expect("update");
     }

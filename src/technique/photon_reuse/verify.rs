@@ -363,7 +363,7 @@ mod tests {
     use super::*;
     use crate::embree::Device;
     use crate::scene::edits::Aabb;
-    use crate::technique::photon_reuse::test_scenes::{edits_at, CornellRun};
+    use crate::technique::photon_reuse::test_scenes::CornellRun;
     use crate::technique::photon_reuse::ReuseMode;
 
     /// Paths whose verdict with the screen's mask differs from the verdict with every segment
@@ -392,10 +392,7 @@ mod tests {
         let (mut retraced, mut caught) = (0, 0);
         for tick in 0..6u32 {
             if tick > 0 {
-                let batch = edits_at(&run.scene, tick);
-                let delta = crate::scene::edits::apply(&mut run.scene, batch).expect("edits");
-                let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
-                run.accel.update_instances(&run.scene, &moved).expect("commit");
+                let delta = run.apply_edits(tick);
                 let store = run.technique.store.as_ref().expect("store");
                 let mut changes = Changes::new(&run.scene, &delta, 1e-3);
                 assert_eq!(disagreements(&run.scene, store, &changes), 0, "tick {tick}");
@@ -458,10 +455,7 @@ mod tests {
         let device = Device::new(2).expect("device");
         let mut run = CornellRun::new(&device, ReuseMode::Naive);
         run.update(0, 3);
-        let batch = edits_at(&run.scene, 3);
-        let delta = crate::scene::edits::apply(&mut run.scene, batch).expect("edits");
-        let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
-        run.accel.update_instances(&run.scene, &moved).expect("commit");
+        let delta = run.apply_edits(3);
         let store = run.technique.store.as_ref().expect("store");
         let mut changes = Changes::new(&run.scene, &delta, 1e-3);
         let union = changes.cover.iter().map(|c| c.bounds).reduce(|a, b| a.union(&b)).expect("moved boxes");
@@ -522,10 +516,7 @@ mod tests {
         let device = Device::new(2).expect("device");
         let mut run = CornellRun::new(&device, ReuseMode::Naive);
         run.update(0, 3);
-        let batch = edits_at(&run.scene, 1);
-        let delta = crate::scene::edits::apply(&mut run.scene, batch).expect("edits");
-        let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
-        run.accel.update_instances(&run.scene, &moved).expect("commit");
+        let delta = run.apply_edits(1);
         let block = delta.moved.iter().find(|m| matches!(m.surface, SurfaceId::Object(_))).expect("the block moved");
         let SurfaceId::Object(o) = block.surface else { unreachable!("an object") };
         let mesh = &run.scene.objects[o as usize].mesh;
