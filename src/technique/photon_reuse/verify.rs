@@ -366,6 +366,15 @@ mod tests {
     use crate::technique::photon_reuse::test_scenes::CornellRun;
     use crate::technique::photon_reuse::ReuseMode;
 
+    /// A `naive` run over the Cornell box after its first tick, with tick `tick`'s edits applied
+    /// and committed but not yet verified, and their delta.
+    fn moved_after_one_tick(device: &Device, tick: u32) -> (CornellRun, SceneDelta) {
+        let mut run = CornellRun::new(device, ReuseMode::Naive);
+        run.update(0, 3);
+        let delta = run.apply_edits(tick);
+        (run, delta)
+    }
+
     /// Paths whose verdict with the screen's mask differs from the verdict with every segment
     /// tested against the box tree (a screened-out path counts as valid).
     fn disagreements(scene: &Scene, store: &PathStore, changes: &Changes) -> usize {
@@ -453,9 +462,7 @@ mod tests {
         // below a cover box decides. Negative control: the same box taken as final, with no
         // tree below it, sets bits no moved box explains.
         let device = Device::new(2).expect("device");
-        let mut run = CornellRun::new(&device, ReuseMode::Naive);
-        run.update(0, 3);
-        let delta = run.apply_edits(3);
+        let (run, delta) = moved_after_one_tick(&device, 3);
         let store = run.technique.store.as_ref().expect("store");
         let mut changes = Changes::new(&run.scene, &delta, 1e-3);
         let union = changes.cover.iter().map(|c| c.bounds).reduce(|a, b| a.union(&b)).expect("moved boxes");
@@ -514,9 +521,7 @@ mod tests {
         // world box miss the block itself, so the exact test saves retraces. Negative control: the same test
         // against where the block was disagrees.
         let device = Device::new(2).expect("device");
-        let mut run = CornellRun::new(&device, ReuseMode::Naive);
-        run.update(0, 3);
-        let delta = run.apply_edits(1);
+        let (run, delta) = moved_after_one_tick(&device, 1);
         let block = delta.moved.iter().find(|m| matches!(m.surface, SurfaceId::Object(_))).expect("the block moved");
         let SurfaceId::Object(o) = block.surface else { unreachable!("an object") };
         let mesh = &run.scene.objects[o as usize].mesh;
