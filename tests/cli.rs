@@ -210,6 +210,16 @@ fn bench_rays_reports_rates_and_regeneration_rows() {
     }
     assert!(raw.iter().all(|r| r["incoherent_closest_mrays"].as_f64().unwrap() > 0.0));
     assert!(v["path_to_raw_ratio"].as_f64().unwrap() > 0.0);
+    // The rate at path's ray mix weighs the default layout's three raw rates by path's rays, so
+    // it lies between the slowest and the fastest of them.
+    let rates: Vec<f64> = ["coherent_primary_mrays", "incoherent_closest_mrays", "incoherent_occlusion_mrays"]
+        .iter()
+        .map(|k| raw[0][k].as_f64().unwrap())
+        .collect();
+    let mix = v["raw_at_path_mix_mrays"].as_f64().unwrap();
+    let (slowest, fastest) =
+        (rates.iter().copied().fold(f64::MAX, f64::min), rates.iter().copied().fold(0.0, f64::max));
+    assert!(slowest <= mix && mix <= fastest, "{mix} outside the raw rates {rates:?}");
     let rows = v["regeneration"].as_array().unwrap();
     assert_eq!(rows.len(), 18, "path and bdpt × 3 variants × 3 widths");
     for technique in ["path", "bdpt"] {

@@ -7,7 +7,12 @@
 //!    geometry nested under an identity instance or flat in the top level, robust or fast
 //!    triangle test, and on a frozen copy with every surface static and flat (the ceiling: one
 //!    BVH, no instances), so the default layout's choice is a measurement.
-//! 2. The `path` technique's achieved ray rate, as a fraction of the raw incoherent rate.
+//! 2. The `path` technique's achieved ray rate, as a fraction of the raw incoherent rate, and
+//!    as a fraction of raw Embree at `path`'s own ray mix: its camera rays at the coherent
+//!    rate, its bounce rays at the incoherent closest-hit rate and its shadow rays at the
+//!    occlusion rate, so the time raw Embree would need for exactly `path`'s rays (the
+//!    harmonic mean weighted by ray counts). That is the ceiling of a tracer whose shading
+//!    cost nothing.
 //! 3. Path regeneration against none at packet widths 1, 8 and 16 on dark (ρ × 0.5), normal and
 //!    bright (ρ_S ≈ 0.8) variants of the scene, as in Novák et al. (2010), Table 1, for `path`
 //!    and for `bdpt`'s eye paths.
@@ -21,7 +26,7 @@ use crate::scene::accel::{AccelLayout, StaticLayout};
 use crate::scene::{Scene, SceneAccel};
 use crate::technique::bdpt::BdptConfig;
 use crate::technique::path::{max_path_length, PathConfig};
-use crate::technique::{TechniqueConfig, TechniqueStats};
+use crate::technique::{RayCounts, TechniqueConfig, TechniqueStats};
 use anyhow::Result;
 use indicatif::ProgressBar;
 use rayon::prelude::*;
@@ -87,6 +92,12 @@ pub struct RaysReport {
     pub path_to_raw_ratio: f64,
     /// path_mrays ÷ the best raw incoherent closest-hit rate of any layout.
     pub path_to_best_raw_ratio: f64,
+    /// Raw Embree at `path`'s ray mix on the default layout and on the best one (Mrays/s;
+    /// see the module doc).
+    pub raw_at_path_mix_mrays: f64,
+    pub best_raw_at_path_mix_mrays: f64,
+    /// path_mrays ÷ raw_at_path_mix_mrays.
+    pub path_to_mix_ratio: f64,
     pub regeneration: Vec<RegenerationRow>,
 }
 
@@ -208,6 +219,8 @@ fn raw_throughput(
 /// One lane technique's rates over a timed run.
 struct LaneRate {
     mrays: f64,
+    /// The rays it traced, by kind.
+    rays: RayCounts,
     paths_per_second: f64,
     utilisation: f64,
     /// Eye segments per path.
@@ -220,11 +233,11 @@ struct LaneRate {
 fn lane_rate(scene: &Scene, config: TechniqueConfig, device: &Device, seconds: f64) -> Result<LaneRate> {
     let mut session = Session::new(scene.clone(), &config, 1, device)?;
     let start = Instant::now();
-    let mut rays = 0u64;
+    let mut rays = RayCounts::default();
     let mut total = crate::technique::path::PathStats::default();
     while total.paths == 0 || start.elapsed().as_secs_f64() < seconds {
         let frame = session.tick()?;
-        rays += frame.stats.rays.total();
+        rays = rays.merge(frame.stats.rays);
         let p = match &frame.stats.detail {
             TechniqueStats::Path(p) => p.clone(),
             TechniqueStats::Bdpt(b) => b.lanes.clone(),
@@ -235,12 +248,22 @@ fn lane_rate(scene: &Scene, config: TechniqueConfig, device: &Device, seconds: f
     let secs = start.elapsed().as_secs_f64();
     let paths = total.paths.max(1) as f64;
     Ok(LaneRate {
-        mrays: rays as f64 / secs / 1e6,
+        mrays: rays.total() as f64 / secs / 1e6,
+        rays,
         paths_per_second: total.paths as f64 / secs,
         utilisation: total.lane_utilisation(),
         segments: (total.rays.primary + total.rays.secondary) as f64 / paths,
         truncated: total.truncated_paths as f64 / paths,
     })
+}
+
+/// Raw Embree's rate (Mrays/s) for `rays` on the layout `raw`: its camera rays at the coherent
+/// rate, bounces at the incoherent closest-hit rate, shadow rays at the occlusion rate.
+fn rate_at_mix(raw: &RawThroughput, rays: &RayCounts) -> f64 {
+    let seconds = rays.primary as f64 / raw.coherent_primary_mrays
+        + rays.secondary as f64 / raw.incoherent_closest_mrays
+        + rays.shadow as f64 / raw.incoherent_occlusion_mrays;
+    rays.total() as f64 / seconds
 }
 
 /// `technique` with `width` lanes and regeneration on or off, other parameters at defaults.
@@ -270,6 +293,7 @@ pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
         bar.set_message("path, default configuration");
         let default_path = lane_rate(&scene, TechniqueConfig::Path(PathConfig::default()), &device, args.seconds)?;
         let (path_mrays, path_sps) = (default_path.mrays, default_path.paths_per_second);
+        let at_mix: Vec<f64> = raw.iter().map(|r| rate_at_mix(r, &default_path.rays)).collect();
         bar.inc(1);
         let mut rows = Vec::new();
         for technique in techniques {
@@ -307,6 +331,9 @@ pub fn measure(args: &RaysArgs) -> Result<RaysReport> {
             threads,
             path_to_raw_ratio: path_mrays / raw[0].incoherent_closest_mrays,
             path_to_best_raw_ratio: path_mrays / raw.iter().map(|r| r.incoherent_closest_mrays).fold(0.0, f64::max),
+            raw_at_path_mix_mrays: at_mix[0],
+            best_raw_at_path_mix_mrays: at_mix.iter().copied().fold(0.0, f64::max),
+            path_to_mix_ratio: path_mrays / at_mix[0],
             raw,
             path_mrays,
             path_samples_per_second: path_sps,
@@ -342,6 +369,10 @@ pub fn print_table(r: &RaysReport) {
     );
     println!("  achieved / default raw incoherent   {:>8.2}", r.path_to_raw_ratio);
     println!("  achieved / best raw incoherent      {:>8.2}", r.path_to_best_raw_ratio);
+    println!(
+        "  raw Embree at path's ray mix        {:>8.2} Mrays/s (best layout {:.2}); achieved / it {:.2}",
+        r.raw_at_path_mix_mrays, r.best_raw_at_path_mix_mrays, r.path_to_mix_ratio
+    );
     println!();
     println!("regeneration (PR) vs none (NO)");
     println!("  technique variant  rho_S  l_m  l_a  cut@l_m  lanes  NO util  NO Mrays/s  PR util  PR Mrays/s  speedup");
