@@ -355,14 +355,13 @@ impl PhotonGrid {
             self.home[keys(path)].fill(NONE);
         }
         let mut entering: Vec<(u32, GridPhoton)> = Vec::with_capacity(fresh.len());
-        let mut new_cells = false;
+        let first_new_cell = self.cells.len();
         for ((coord, photon), known) in fresh.into_iter().zip(known) {
             let slot = known.unwrap_or_else(|| {
                 let next = self.cells.len() as u32;
                 let slot = *self.index.entry(coord).or_insert(next);
                 if slot == next {
                     self.cells.push(Cell { coord, ..Cell::default() });
-                    new_cells = true;
                 }
                 slot
             });
@@ -375,9 +374,7 @@ impl PhotonGrid {
         // leaves each slot's share in key order.
         let (leaving, entering) = (by_slot(&leaving, self.cells.len()), by_slot(&entering, self.cells.len()));
         let (touched, removed) = self.merge_changes(&leaving, &entering);
-        if new_cells {
-            self.sort_order();
-        }
+        self.order_new_cells(first_new_cell);
         self.sum_power();
         let added = entering.into_iter().map(|(_, p)| p).collect();
         (GridUpdate { cells_touched: touched, ..stats }, ChangedPhotons { removed, added })
@@ -418,10 +415,33 @@ impl PhotonGrid {
         (work.len() as u64, removed)
     }
 
-    fn sort_order(&mut self) {
+    /// Puts the cells from `first_new` on into `order`: they are sorted among themselves and
+    /// merged into the sorted rest, so the cost follows the new cells (and one pass over
+    /// `order`), not a sort of every cell. Coordinates are unique, so the order is the one a
+    /// full sort gives.
+    fn order_new_cells(&mut self, first_new: usize) {
+        if first_new >= self.cells.len() {
+            return;
+        }
         let cells = &self.cells;
-        self.order = (0..cells.len() as u32).collect();
-        self.order.par_sort_unstable_by_key(|&s| pack(cells[s as usize].coord));
+        let key = |s: &u32| pack(cells[*s as usize].coord);
+        let mut new: Vec<u32> = (first_new as u32..cells.len() as u32).collect();
+        new.sort_unstable_by_key(key);
+        let old = std::mem::take(&mut self.order);
+        let mut order = Vec::with_capacity(cells.len());
+        let (mut i, mut j) = (0, 0);
+        while i < old.len() && j < new.len() {
+            if key(&old[i]) < key(&new[j]) {
+                order.push(old[i]);
+                i += 1;
+            } else {
+                order.push(new[j]);
+                j += 1;
+            }
+        }
+        order.extend_from_slice(&old[i..]);
+        order.extend_from_slice(&new[j..]);
+        self.order = order;
     }
 
     fn sum_power(&mut self) {
