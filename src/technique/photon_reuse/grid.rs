@@ -416,9 +416,9 @@ impl PhotonGrid {
     }
 
     /// Puts the cells from `first_new` on into `order`: they are sorted among themselves and
-    /// merged into the sorted rest, so the cost follows the new cells (and one pass over
-    /// `order`), not a sort of every cell. Coordinates are unique, so the order is the one a
-    /// full sort gives.
+    /// appended, and the stable sort merges the two sorted runs in one pass (it finds runs), so
+    /// the cost follows the new cells and one pass over `order`, not a sort of every cell.
+    /// Coordinates are unique, so the order is the one a full sort gives.
     fn order_new_cells(&mut self, first_new: usize) {
         if first_new >= self.cells.len() {
             return;
@@ -427,21 +427,8 @@ impl PhotonGrid {
         let key = |s: &u32| pack(cells[*s as usize].coord);
         let mut new: Vec<u32> = (first_new as u32..cells.len() as u32).collect();
         new.sort_unstable_by_key(key);
-        let old = std::mem::take(&mut self.order);
-        let mut order = Vec::with_capacity(cells.len());
-        let (mut i, mut j) = (0, 0);
-        while i < old.len() && j < new.len() {
-            if key(&old[i]) < key(&new[j]) {
-                order.push(old[i]);
-                i += 1;
-            } else {
-                order.push(new[j]);
-                j += 1;
-            }
-        }
-        order.extend_from_slice(&old[i..]);
-        order.extend_from_slice(&new[j..]);
-        self.order = order;
+        self.order.extend(new);
+        self.order.sort_by_key(key);
     }
 
     fn sum_power(&mut self) {
