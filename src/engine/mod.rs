@@ -241,7 +241,7 @@ impl Session {
         // Let the technique verify and invalidate; restart accumulation where it says.
         let t = Instant::now();
         let ctx = RenderContext { scene: &self.scene, accel: &self.accel, seed: self.seed, tick: self.tick };
-        self.technique.update(&ctx, &delta)?;
+        let update = self.technique.update(&ctx, &delta)?;
         if self.technique.restarts_whole_film(&delta) || self.restored {
             self.film.reset();
         }
@@ -251,7 +251,7 @@ impl Session {
         times.update_ms = ms(t);
 
         let t = Instant::now();
-        let render = self.technique.render(&ctx, &mut self.film)?;
+        let render = self.technique.render(&ctx, &mut self.film, update)?;
         times.render_ms = ms(t);
 
         let t = Instant::now();

@@ -3,7 +3,9 @@
 //! factory.
 //!
 //! A technique is driven by the engine once per tick: `update` sees what the edits changed
-//! (verify, invalidate, retrace), then `render` adds samples to the film. Per-tick calls go
+//! (verify, invalidate, retrace), then `render` adds samples to the film. The figures `update`
+//! gathers travel to `render` as a value ([`UpdateStats`]): per-tick figures are not fields of
+//! the state a technique keeps across ticks. Per-tick calls go
 //! through `Box<dyn Technique>`; per-ray variety inside a technique is a closed `enum`.
 //!
 //! Adding a technique: its folder holds the code, its configuration and its registry
@@ -233,12 +235,29 @@ impl TechniqueConfig {
     }
 }
 
+/// The figures a tick's `update` gathered, in the technique's own stats type, on their way to
+/// the same tick's `render`. Empty for a technique whose `update` measures nothing.
+#[derive(Default)]
+pub struct UpdateStats(Option<Box<dyn std::any::Any + Send>>);
+
+impl UpdateStats {
+    pub fn new<T: std::any::Any + Send>(stats: T) -> UpdateStats {
+        UpdateStats(Some(Box::new(stats)))
+    }
+
+    /// The figures as a `T`, or `T`'s default if there are none of that type.
+    pub fn take<T: std::any::Any + Default>(self) -> T {
+        self.0.and_then(|b| b.downcast::<T>().ok()).map_or_else(T::default, |b| *b)
+    }
+}
+
 /// A light-transport method driven by the engine, one tick at a time.
 pub trait Technique: Send {
     fn id(&self) -> &'static str;
 
-    /// Reacts to what changed since the last tick (an empty delta on the first tick).
-    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError>;
+    /// Reacts to what changed since the last tick (an empty delta on the first tick). Returns
+    /// the figures it gathered, which the engine hands to this tick's `render`.
+    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<UpdateStats, TechniqueError>;
 
     /// Asked after `update`: should the engine restart the whole film for this delta? The
     /// default is any change. A technique that restarts only the pixels a change touched
@@ -247,8 +266,14 @@ pub trait Technique: Send {
         !delta.is_empty()
     }
 
-    /// Adds this tick's samples to `film`.
-    fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError>;
+    /// Adds this tick's samples to `film`; `update` holds what this tick's `update` returned,
+    /// which the technique completes into its [`RenderStats`].
+    fn render(
+        &mut self,
+        ctx: &RenderContext,
+        film: &mut Film,
+        update: UpdateStats,
+    ) -> Result<RenderStats, TechniqueError>;
 
     /// An edge-preserving filter the engine applies to the resolved image (previews only).
     fn preview_filter(&self) -> Option<path::PreviewFilter> {

@@ -77,7 +77,7 @@ mod vertex;
 use super::path::packets::{trace_chunk, LaneSettings};
 use super::path::{LanePlan, PathConfig, PathStats};
 use super::registry::{Parameter, ParameterKind, TechniqueDescription, SPP};
-use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
+use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats, UpdateStats};
 use crate::core::{Rgb, Rng};
 use crate::film::{Film, PixelAccum};
 use crate::scene::edits::SceneDelta;
@@ -192,14 +192,14 @@ impl Technique for Bdpt {
         "bdpt"
     }
 
-    fn update(&mut self, _ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
+    fn update(&mut self, _ctx: &RenderContext, delta: &SceneDelta) -> Result<UpdateStats, TechniqueError> {
         if !delta.is_empty() {
             self.passes = 0;
         }
-        Ok(())
+        Ok(UpdateStats::default())
     }
 
-    fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
+    fn render(&mut self, ctx: &RenderContext, film: &mut Film, _: UpdateStats) -> Result<RenderStats, TechniqueError> {
         let LanePlan { max_path_length: l_m, mean_reflectance: rho, settings, queue } =
             self.config.eye_settings().lane_plan(ctx.scene, ctx.accel.scene().device().isa());
         let pixels = film.width as usize * film.height as usize;

@@ -107,7 +107,7 @@ pub use config::{
 };
 
 use super::camera_chain::DiffuseHit;
-use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
+use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats, UpdateStats};
 use crate::core::Rgb;
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -140,7 +140,6 @@ pub struct InstantCache {
     /// On-demand re-evaluation: this tick's changes, for records flagged stale.
     changes: Option<TickChanges>,
     passes: u64,
-    pending: InstantCacheStats,
     /// The photon paths the VPLs come from; `None` until they are first shot.
     vpl_paths: Option<u64>,
     /// `temporal`: nothing this tick can change a cached irradiance (no scene change, so the
@@ -193,7 +192,6 @@ impl InstantCache {
             cache: None,
             changes: None,
             passes: 0,
-            pending: InstantCacheStats::default(),
             vpl_paths: None,
             still: false,
             samples: Vec::new(),
@@ -218,7 +216,7 @@ impl InstantCache {
     }
 
     /// Shoots VPL generation `generation` (`vpl.rs`; 0 is the resident one) and returns it.
-    fn shoot(&mut self, ctx: &RenderContext, generation: u32) -> Vec<Vpl> {
+    fn shoot(&mut self, ctx: &RenderContext, generation: u32, stats: &mut InstantCacheStats) -> Vec<Vpl> {
         let rho = ctx.scene.mean_reflectance();
         // About `vpls` VPLs: a path leaves 1/(1 − ρ_S) on average; at most 4× that are kept.
         let paths = ((self.config.vpls as f32 * (1.0 - rho.clamp(0.0, 0.95))).ceil() as u64).max(1);
@@ -228,9 +226,9 @@ impl InstantCache {
         if generation == 0 {
             self.vpl_paths = Some(shot.paths);
         }
-        self.pending.vpl_paths = shot.paths;
-        self.pending.vpl_cap_reached = shot.capped;
-        self.pending.vpl_rays = shot.rays;
+        stats.vpl_paths = shot.paths;
+        stats.vpl_cap_reached = shot.capped;
+        stats.vpl_rays = shot.rays;
         shot.vpls
     }
 
@@ -265,10 +263,15 @@ impl InstantCache {
 
     /// `temporal`, at the start of a tick: ages the cache and applies what changed since the
     /// VPLs `old_vpls` (cases 1–5), at once or by flagging records for on-demand re-evaluation.
-    fn invalidate(&mut self, ctx: &RenderContext, moved: &Arc<Moved>, old_vpls: Vec<Vpl>) {
+    fn invalidate(
+        &mut self,
+        ctx: &RenderContext,
+        moved: &Arc<Moved>,
+        old_vpls: Vec<Vpl>,
+        stats: &mut InstantCacheStats,
+    ) {
         let min_distance = self.min_distance(ctx);
         let Some(cache) = self.cache.as_mut() else { return };
-        let stats = &mut self.pending;
         stats.records_dropped_stale = cache.retain(|r| !r.stale);
         self.changes = None;
         let (tick, max_age) = (ctx.tick, self.config.max_age as u64);
@@ -304,6 +307,7 @@ impl InstantCache {
         k: usize,
         (shaded, kept): (&[Shaded], &[bool]),
         renumbering: Option<&[u32]>,
+        stats: &mut InstantCacheStats,
     ) -> Vec<Option<Rgb>> {
         let min_distance = self.min_distance(ctx);
         let extent = self.extent(ctx);
@@ -324,8 +328,8 @@ impl InstantCache {
         let still = self.still && renumbering.is_none();
         if still {
             if let Some(indirect) = pixels::all_kept(&states, kept) {
-                self.pending.records_reused += pixels::mark_used(cache, None, cache.records.len(), ctx.tick);
-                self.pending.samples_reused += indirect.iter().filter(|e| e.is_some()).count() as u64;
+                stats.records_reused += pixels::mark_used(cache, None, cache.records.len(), ctx.tick);
+                stats.samples_reused += indirect.iter().filter(|e| e.is_some()).count() as u64;
                 self.samples[k] = states;
                 return indirect;
             }
@@ -339,11 +343,10 @@ impl InstantCache {
         let looked = pixels::look_up(cache, &mut states, &needs, &new);
         let t = Instant::now();
         let works = compute_records(ctx, cache, &self.vpls, self.changes.as_ref(), first_new, &states, min_distance);
-        self.pending.records_ms += t.elapsed().as_secs_f64() * 1e3;
+        stats.records_ms += t.elapsed().as_secs_f64() * 1e3;
         let looked_up = looked.iter().filter(|&&l| l).count() as u64;
         let lookups = looked_up + coverage_tests;
         let out = pixels::interpolate_all(&cache.records, &mut states, &looked, still);
-        let stats = &mut self.pending;
         stats.records_reused += pixels::mark_used(cache, (looked_up > 0).then_some(&out.used), first_new, ctx.tick);
         stats.records_created += new.count;
         for (rays, refresh) in works {
@@ -366,19 +369,19 @@ impl InstantCache {
     }
 
     /// With `audit`: checks every record against a fresh computation (not timed as indirect).
-    fn audit(&mut self, ctx: &RenderContext) {
+    fn audit(&mut self, ctx: &RenderContext, stats: &mut InstantCacheStats) {
         let min_distance = self.min_distance(ctx);
         let reach = 10.0 * super::box_tree::BOX_SLACK * self.extent(ctx).diagonal;
         let Some(cache) = &self.cache else { return };
         let audit = cache::audit(ctx.accel, cache, &self.vpls, min_distance, reach);
-        self.pending.audit_records += audit.records;
-        self.pending.audit_mismatched += audit.mismatched;
-        self.pending.audit_off_surface += audit.off_surface;
-        self.pending.audit_digest = audit.digest;
+        stats.audit_records += audit.records;
+        stats.audit_mismatched += audit.mismatched;
+        stats.audit_off_surface += audit.off_surface;
+        stats.audit_digest = audit.digest;
     }
 
     /// Renders this tick's `spp` passes into `film` with the VPLs, cache and samples in place.
-    fn render_passes(&mut self, ctx: &RenderContext, film: &mut Film) {
+    fn render_passes(&mut self, ctx: &RenderContext, film: &mut Film, stats: &mut InstantCacheStats) {
         let scene = ctx.scene;
         // Taken once: every pass's kept lists date from the last tick's passes.
         let renumbering = self.cache.as_mut().and_then(Cache::take_renumbering);
@@ -402,31 +405,31 @@ impl InstantCache {
             let cameras::Shading { counts, kept } =
                 cameras::shade(ctx, mode, stream, &mut samples, reuse, self.config.audit);
             let shaded = samples.shaded();
-            self.pending.camera_ms += t.elapsed().as_secs_f64() * 1e3;
-            self.pending.camera_samples_kept += counts.kept;
-            self.pending.direct_samples_kept += counts.direct_kept;
-            self.pending.camera_runs_settled += counts.settled_runs;
-            self.pending.audit_cameras_mismatched += counts.mismatched;
+            stats.camera_ms += t.elapsed().as_secs_f64() * 1e3;
+            stats.camera_samples_kept += counts.kept;
+            stats.direct_samples_kept += counts.direct_kept;
+            stats.camera_runs_settled += counts.settled_runs;
+            stats.audit_cameras_mismatched += counts.mismatched;
             let t = Instant::now();
             let indirect = match self.mode() {
                 CacheMode::Igi => {
                     let hits: Vec<Option<DiffuseHit>> = shaded.iter().map(|s| s.sample.hit).collect();
                     let (n, min_distance) = (self.config.interleave as usize, self.min_distance(ctx));
                     let (indirect, rays) = igi::indirect(ctx, &self.vpls, &hits, n, min_distance);
-                    self.pending.visibility_rays_new += rays;
+                    stats.visibility_rays_new += rays;
                     indirect
                 }
                 CacheMode::Static | CacheMode::Temporal => {
-                    self.cached_indirect(ctx, pass_in_tick, (shaded, &kept), renumbering.as_deref())
+                    self.cached_indirect(ctx, pass_in_tick, (shaded, &kept), renumbering.as_deref(), stats)
                 }
             };
-            self.pending.indirect_ms += t.elapsed().as_secs_f64() * 1e3;
+            stats.indirect_ms += t.elapsed().as_secs_f64() * 1e3;
             if self.config.audit {
-                self.audit(ctx);
+                self.audit(ctx, stats);
             }
-            self.pending.camera_rays += shaded.len() as u64 - counts.kept;
-            self.pending.specular_rays += cameras::accumulate(film, scene, shaded, &indirect);
-            self.pending.shadow_rays += counts.shadow_rays;
+            stats.camera_rays += shaded.len() as u64 - counts.kept;
+            stats.specular_rays += cameras::accumulate(film, scene, shaded, &indirect);
+            stats.shadow_rays += counts.shadow_rays;
             if resident {
                 self.cameras.resize_with(self.config.spp as usize, Samples::default);
                 self.cameras[pass_in_tick] = samples;
@@ -437,7 +440,7 @@ impl InstantCache {
             film.passes += 1;
         }
         let bytes = self.cameras.iter().map(Samples::bytes).sum::<usize>();
-        self.pending.memory.set("cameras", bytes as u64);
+        stats.memory.set("cameras", bytes as u64);
     }
 }
 
@@ -493,18 +496,18 @@ impl Technique for InstantCache {
         "instant_cache"
     }
 
-    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
-        self.pending = InstantCacheStats::default();
+    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<UpdateStats, TechniqueError> {
+        let mut stats = InstantCacheStats::default();
         self.kind = self.tick_kind(delta);
         let t = Instant::now();
         // VPLs depend on geometry, lights and materials, not on the camera: a tick that changes
         // none of them keeps them (the Halton set would give the same ones again).
         let transport_changed = !(delta.moved.is_empty() && delta.lights.is_empty() && delta.materials.is_empty());
-        self.pending.vpl_paths = self.vpl_paths.unwrap_or(0);
+        stats.vpl_paths = self.vpl_paths.unwrap_or(0);
         let old_vpls = match self.vpl_paths {
             Some(_) if !transport_changed => self.vpls.clone(),
             _ => {
-                let shot = self.shoot(ctx, 0);
+                let shot = self.shoot(ctx, 0, &mut stats);
                 std::mem::replace(&mut self.vpls, shot)
             }
         };
@@ -514,21 +517,21 @@ impl Technique for InstantCache {
             TickKind::Idle => self.generation,
         };
         match self.kind {
-            TickKind::Refine => self.refinement.vpls = self.shoot(ctx, self.generation),
+            TickKind::Refine => self.refinement.vpls = self.shoot(ctx, self.generation, &mut stats),
             // A change ends the refinement; its generation's memory goes.
             TickKind::Resident if !delta.is_empty() => self.refinement = Layer::default(),
             TickKind::Resident | TickKind::Idle => {}
         }
-        self.pending.generation = self.generation;
-        self.pending.idle = self.kind == TickKind::Idle;
+        stats.generation = self.generation;
+        stats.idle = self.kind == TickKind::Idle;
         let rendered = if self.kind == TickKind::Refine { &self.refinement.vpls } else { &self.vpls };
-        self.pending.vpls = rendered.len() as u64;
-        self.pending.memory.set("vpls", ((self.vpls.len() + self.refinement.vpls.len()) * size_of::<Vpl>()) as u64);
-        self.pending.vpl_ms = t.elapsed().as_secs_f64() * 1e3;
+        stats.vpls = rendered.len() as u64;
+        stats.memory.set("vpls", ((self.vpls.len() + self.refinement.vpls.len()) * size_of::<Vpl>()) as u64);
+        stats.vpl_ms = t.elapsed().as_secs_f64() * 1e3;
         if self.config.mode == CacheMode::Temporal {
             let t = Instant::now();
             let moved = Arc::new(Moved::new(ctx.scene, ctx.accel, delta, self.extent(ctx).diagonal)?);
-            self.invalidate(ctx, &moved, old_vpls);
+            self.invalidate(ctx, &moved, old_vpls, &mut stats);
             // A moved light's shape is among the moved surfaces; a changed emitter may be a new shape.
             let emitters = delta.lights.iter().any(|l| l.emission_changed);
             let camera_change = delta.camera || !delta.materials.is_empty() || emitters;
@@ -540,35 +543,40 @@ impl Technique for InstantCache {
             if let (TickKind::Refine | TickKind::Idle, Some(cache)) = (self.kind, self.cache.as_mut()) {
                 pixels::mark_used(cache, None, cache.records.len(), ctx.tick);
             }
-            self.pending.invalidate_ms = t.elapsed().as_secs_f64() * 1e3;
+            stats.invalidate_ms = t.elapsed().as_secs_f64() * 1e3;
         }
         self.still = self.mode() == CacheMode::Temporal && delta.is_empty() && self.changes.is_none();
         if !delta.is_empty() {
             self.passes = 0;
         }
-        Ok(())
+        Ok(UpdateStats::new(stats))
     }
 
-    fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
+    fn render(
+        &mut self,
+        ctx: &RenderContext,
+        film: &mut Film,
+        update: UpdateStats,
+    ) -> Result<RenderStats, TechniqueError> {
         let start = Instant::now();
+        let mut stats: InstantCacheStats = update.take();
         match self.kind {
-            TickKind::Resident => self.render_passes(ctx, film),
+            TickKind::Resident => self.render_passes(ctx, film, &mut stats),
             TickKind::Refine => {
                 self.swap_layers();
-                self.render_passes(ctx, film);
+                self.render_passes(ctx, film, &mut stats);
                 self.swap_layers();
             }
             TickKind::Idle => {}
         }
         if self.config.mode != CacheMode::Igi {
-            self.pending.records = self.cache.as_ref().map_or(0, |c| c.records.len() as u64);
-            self.pending.memory.set("cache", self.cache.as_ref().map_or(0, Cache::memory_bytes));
-            self.pending.memory.set("samples", pixels::samples_bytes(&self.samples));
+            stats.records = self.cache.as_ref().map_or(0, |c| c.records.len() as u64);
+            stats.memory.set("cache", self.cache.as_ref().map_or(0, Cache::memory_bytes));
+            stats.memory.set("samples", pixels::samples_bytes(&self.samples));
         }
         let layer = &self.refinement;
         let cache = layer.cache.as_ref().map_or(0, Cache::memory_bytes);
-        self.pending.memory.set("refinement", cache + pixels::samples_bytes(&layer.samples));
-        let mut stats = std::mem::take(&mut self.pending);
+        stats.memory.set("refinement", cache + pixels::samples_bytes(&layer.samples));
         stats.render_ms = start.elapsed().as_secs_f64() * 1e3;
         stats.visibility_rays = stats.visibility_rays_new
             + stats.visibility_rays_vpl

@@ -83,7 +83,7 @@ mod strata;
 pub use config::{ParticleGiConfig, ParticleStats, MAX_PARTICLES};
 
 use super::path::max_path_length;
-use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
+use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats, UpdateStats};
 use crate::core::Rgb;
 use crate::film::Film;
 use crate::scene::edits::{Aabb, SceneDelta};
@@ -132,7 +132,6 @@ pub struct ParticleGi {
     /// Estimates per radiance particle, valid while `lighting` and the lists hold.
     estimates: Estimates,
     passes: u64,
-    pending: ParticleStats,
 }
 
 impl ParticleGi {
@@ -145,7 +144,6 @@ impl ParticleGi {
             lighting: None,
             estimates: Estimates::default(),
             passes: 0,
-            pending: ParticleStats::default(),
         })
     }
 
@@ -190,7 +188,13 @@ impl ParticleGi {
     /// Carries the particles of moved objects, rescales those of `rescaled` ones (their
     /// subtriangles and cached estimates start over), and retraces the links that may have
     /// changed.
-    fn update_geometry(&mut self, ctx: &RenderContext, delta: &SceneDelta, rescaled: &[usize]) {
+    fn update_geometry(
+        &mut self,
+        ctx: &RenderContext,
+        delta: &SceneDelta,
+        rescaled: &[usize],
+        stats: &mut ParticleStats,
+    ) {
         let Some(g) = self.geometry.as_mut() else { return };
         let mut moved = vec![false; ctx.scene.objects.len()];
         for m in &delta.moved {
@@ -206,7 +210,7 @@ impl ParticleGi {
             g.scales[o] = particles::stable_scale(ctx.scene, o);
             moved[o] = true;
         }
-        self.pending.objects_rescaled += rescaled.len() as u64;
+        stats.objects_rescaled += rescaled.len() as u64;
         let carried: Vec<usize> = (0..g.particles.len()).filter(|&i| moved[g.particles.object[i] as usize]).collect();
         if let (Some(&first), Some(&last)) = (carried.first(), carried.last()) {
             // Particles are grouped by object; re-place the span, which covers every carried one.
@@ -226,14 +230,14 @@ impl ParticleGi {
         let target = Target::new(ctx, &g.particles, &g.grids);
         for set in [&mut g.scatter, &mut g.gather] {
             let (traced, tests) = set.update(target, &moves);
-            self.pending.links_traced += traced;
-            self.pending.link_box_tests += tests;
+            stats.links_traced += traced;
+            stats.link_box_tests += tests;
         }
         g.lists.invalidate(&moved);
     }
 
     /// Builds or updates the geometry stage as `delta` requires. Returns whether it changed.
-    fn update_geometry_stage(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> bool {
+    fn update_geometry_stage(&mut self, ctx: &RenderContext, delta: &SceneDelta, stats: &mut ParticleStats) -> bool {
         let toggled = delta
             .materials
             .iter()
@@ -251,7 +255,7 @@ impl ParticleGi {
             self.build_geometry(ctx);
             true
         } else if moved || !rescaled.is_empty() {
-            self.update_geometry(ctx, delta, &rescaled);
+            self.update_geometry(ctx, delta, &rescaled, stats);
             true
         } else {
             false
@@ -265,9 +269,15 @@ impl ParticleGi {
     /// walks can reach. Cached estimates follow: scaled with their share, or, after any other
     /// change of the field, gathered again in place if fresh for the view and their lists held
     /// (the rest are forgotten, `gather.rs`).
-    fn update_lighting(&mut self, ctx: &RenderContext, delta: &SceneDelta, geometry_changed: bool) {
+    fn update_lighting(
+        &mut self,
+        ctx: &RenderContext,
+        delta: &SceneDelta,
+        geometry_changed: bool,
+        stats: &mut ParticleStats,
+    ) {
         let bounces = self.bounces(ctx.scene);
-        let Some((emit, scatter)) = self.lighting_plan(ctx, delta, geometry_changed) else { return };
+        let Some((emit, scatter)) = self.lighting_plan(ctx, delta, geometry_changed, stats) else { return };
         let (Some(g), Some(lighting)) = (self.geometry.as_mut(), self.lighting.as_mut()) else { return };
         let (samples, seed) = (self.config.emission_samples, self.config.seed);
         let inputs = Inputs { scene: ctx.scene, accel: ctx.accel, particles: &g.particles, samples, bounces, seed };
@@ -279,13 +289,13 @@ impl ParticleGi {
         let work = lighting.scatter(&inputs, &g.scatter, &scatter);
         // Fresh estimates whose lists held are gathered again in place; the rest go.
         let keys: Vec<RadianceKey> = self.estimates.fresh_keys().into_iter().filter(|&k| g.lists.contains(k)).collect();
-        self.pending.links_traced += reached;
-        self.pending.links_built_lazily += reached;
-        self.pending.geometry_ms += geometry_ms;
-        self.record(emitted);
-        self.record(work);
+        stats.links_traced += reached;
+        stats.links_built_lazily += reached;
+        stats.geometry_ms += geometry_ms;
+        stats.record(emitted);
+        stats.record(work);
         self.estimates.invalidate();
-        self.gather_and_store(ctx, &keys);
+        self.gather_and_store(ctx, &keys, stats);
     }
 
     /// Which shares to re-emit and re-scatter, with intensity edits applied as scales (`None`:
@@ -295,6 +305,7 @@ impl ParticleGi {
         ctx: &RenderContext,
         delta: &SceneDelta,
         geometry_changed: bool,
+        stats: &mut ParticleStats,
     ) -> Option<(Vec<bool>, Vec<bool>)> {
         let g = self.geometry.as_ref()?;
         let (lights, shares) = (ctx.scene.lights.len(), lighting::share_count(ctx.scene.lights.len()));
@@ -312,7 +323,7 @@ impl ParticleGi {
                 Some(f) if !change.moved && lighting::alone_in_share(change.light, lights) => {
                     lighting.scale(share, f);
                     self.estimates.scale(share, f);
-                    self.pending.lights_rescaled += 1;
+                    stats.lights_rescaled += 1;
                 }
                 _ => emit[share] = true,
             }
@@ -320,13 +331,16 @@ impl ParticleGi {
         let scatter = if delta.materials.is_empty() { emit.clone() } else { vec![true; shares] };
         scatter.contains(&true).then_some((emit, scatter))
     }
+}
 
+impl ParticleStats {
+    /// Adds a lighting stage's work.
     fn record(&mut self, work: LightingWork) {
-        self.pending.emission_rays += work.emission_rays;
-        self.pending.particles_lit += work.lit;
-        self.pending.scatter_deposits += work.deposits;
-        self.pending.emission_ms += work.emission_ms;
-        self.pending.scattering_ms += work.scattering_ms;
+        self.emission_rays += work.emission_rays;
+        self.particles_lit += work.lit;
+        self.scatter_deposits += work.deposits;
+        self.emission_ms += work.emission_ms;
+        self.scattering_ms += work.scattering_ms;
     }
 }
 
@@ -335,36 +349,42 @@ impl Technique for ParticleGi {
         "particle_gi"
     }
 
-    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
-        self.pending = ParticleStats::default();
+    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<UpdateStats, TechniqueError> {
+        let mut stats = ParticleStats::default();
         let t = Instant::now();
-        let geometry_changed = self.update_geometry_stage(ctx, delta);
-        self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
+        let geometry_changed = self.update_geometry_stage(ctx, delta, &mut stats);
+        stats.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
         if delta.camera {
             self.estimates.age();
         }
-        self.update_lighting(ctx, delta, geometry_changed);
+        self.update_lighting(ctx, delta, geometry_changed, &mut stats);
         if !delta.is_empty() {
             self.passes = 0;
         }
-        Ok(())
+        Ok(UpdateStats::new(stats))
     }
 
-    fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
+    fn render(
+        &mut self,
+        ctx: &RenderContext,
+        film: &mut Film,
+        update: UpdateStats,
+    ) -> Result<RenderStats, TechniqueError> {
+        let mut stats: ParticleStats = update.take();
         let scene = ctx.scene;
         let width = scene.camera.width as usize;
         let pixels = width * scene.camera.height as usize;
         let pass = self.passes * (1 + self.config.supersample as u64);
         let first: Vec<(usize, u64)> = (0..pixels).map(|i| (i, pass)).collect();
-        let mut shaded = self.shade(ctx, &first);
+        let mut shaded = self.shade(ctx, &first, &mut stats);
         if self.config.supersample > 0 {
             let aliased = self.aliased(&shaded, width);
-            self.pending.supersampled_pixels = aliased.len() as u64;
+            stats.supersampled_pixels = aliased.len() as u64;
             let extra: Vec<(usize, u64)> = aliased
                 .iter()
                 .flat_map(|&i| (1..=self.config.supersample as u64).map(move |k| (i, pass + k)))
                 .collect();
-            shaded.extend(self.shade(ctx, &extra));
+            shaded.extend(self.shade(ctx, &extra, &mut stats));
         }
         let mut sums = vec![(Rgb::BLACK, 0.0f64); pixels];
         for s in shaded {
@@ -385,7 +405,6 @@ impl Technique for ParticleGi {
         );
         self.passes += 1;
         film.passes += 1;
-        let mut stats = std::mem::take(&mut self.pending);
         if let Some(g) = &self.geometry {
             stats.area_particles = g.particles.len() as u64;
             stats.particle_area = g.particles.area as f64;

@@ -6,7 +6,7 @@
 use super::gather::{self, Estimates};
 use super::links::Target;
 use super::radiance::{self, EstimationLists, RadianceKey, Tessellation};
-use super::ParticleGi;
+use super::{ParticleGi, ParticleStats};
 use crate::core::{Rgb, Rng};
 use crate::technique::camera_chain::{self, CameraSample};
 use crate::technique::RenderContext;
@@ -59,7 +59,7 @@ pub(super) struct Shaded {
 
 impl ParticleGi {
     /// Camera samples `(pixel, sample)` with their direct light (the preliminary trace).
-    fn trace(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<Shaded> {
+    fn trace(&mut self, ctx: &RenderContext, samples: &[(usize, u64)], stats: &mut ParticleStats) -> Vec<Shaded> {
         let t = Instant::now();
         let scene = ctx.scene;
         let shaded: Vec<Shaded> = samples
@@ -75,17 +75,17 @@ impl ParticleGi {
                 Shaded { pixel, sample: s, direct, shadow: shadow.is_some() }
             })
             .collect();
-        self.pending.camera_rays += samples.len() as u64;
-        self.pending.specular_rays += shaded.iter().map(|s| s.sample.specular_rays).sum::<u64>();
-        self.pending.shadow_rays += shaded.iter().filter(|s| s.shadow).count() as u64;
-        self.pending.trace_ms += t.elapsed().as_secs_f64() * 1e3;
+        stats.camera_rays += samples.len() as u64;
+        stats.specular_rays += shaded.iter().map(|s| s.sample.specular_rays).sum::<u64>();
+        stats.shadow_rays += shaded.iter().filter(|s| s.shadow).count() as u64;
+        stats.trace_ms += t.elapsed().as_secs_f64() * 1e3;
         shaded
     }
 
     /// Indirect irradiance at each shaded sample, interpolated over its hit's subtriangle from
     /// the cached estimates; radiance particles without one get their lists, gathering and
     /// estimation first.
-    fn indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded]) -> Vec<Rgb> {
+    fn indirect(&mut self, ctx: &RenderContext, shaded: &[Shaded], stats: &mut ParticleStats) -> Vec<Rgb> {
         let (Some(g), true) = (self.geometry.as_ref(), self.lighting.is_some()) else {
             return vec![Rgb::BLACK; shaded.len()];
         };
@@ -96,7 +96,7 @@ impl ParticleGi {
             shaded.par_iter().map(|s| corners(s).map_or(Some(Rgb::BLACK), |c| interpolate(estimates, &c))).collect();
         let pending: Vec<usize> = (0..shaded.len()).filter(|&i| indirect[i].is_none()).collect();
         if pending.is_empty() {
-            self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
+            stats.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
             return indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect();
         }
         // After a light move every sample is pending: their corners are gathered in parallel,
@@ -117,8 +117,8 @@ impl ParticleGi {
             })
             .collect();
         let missing = estimates.missing(chunks.into_iter().flatten());
-        self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
-        self.estimate_missing(ctx, &missing);
+        stats.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
+        self.estimate_missing(ctx, &missing, stats);
         let t = Instant::now();
         let Some(g) = self.geometry.as_ref() else { return vec![Rgb::BLACK; shaded.len()] };
         let estimates = &self.estimates;
@@ -129,13 +129,18 @@ impl ParticleGi {
         for (&i, value) in pending.iter().zip(filled) {
             indirect[i] = value;
         }
-        self.pending.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
+        stats.preliminary_ms += t.elapsed().as_secs_f64() * 1e3;
         indirect.into_iter().map(|e| e.unwrap_or(Rgb::BLACK)).collect()
     }
 
     /// Lists, gathering and estimation for the radiance particles `missing`, whose estimates
     /// are then cached.
-    fn estimate_missing(&mut self, ctx: &RenderContext, missing: &[(RadianceKey, radiance::Vertex)]) {
+    fn estimate_missing(
+        &mut self,
+        ctx: &RenderContext,
+        missing: &[(RadianceKey, radiance::Vertex)],
+        stats: &mut ParticleStats,
+    ) {
         let (Some(g), true) = (self.geometry.as_mut(), self.lighting.is_some()) else { return };
         let t = Instant::now();
         let (radius, cosine) = (self.config.estimation_radius * g.spacing, self.config.estimation_cosine);
@@ -144,41 +149,46 @@ impl ParticleGi {
             .filter(|(k, _)| !g.lists.contains(*k))
             .map(|(k, v)| (*k, EstimationLists::build(ctx.scene, &g.particles, &g.grids, v, radius, cosine)))
             .collect();
-        self.pending.lists_built += built.len() as u64;
+        stats.lists_built += built.len() as u64;
         built.into_iter().for_each(|(k, l)| g.lists.insert(k, l));
-        self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
+        stats.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
         let keys: Vec<RadianceKey> = missing.iter().map(|(k, _)| *k).collect();
-        self.gather_and_store(ctx, &keys);
+        self.gather_and_store(ctx, &keys, stats);
     }
 
     /// Gathering (with the lazy links it needs) and estimation for the radiance particles
     /// `keys`, whose lists exist; their estimates are then cached.
-    pub(super) fn gather_and_store(&mut self, ctx: &RenderContext, keys: &[RadianceKey]) {
+    pub(super) fn gather_and_store(&mut self, ctx: &RenderContext, keys: &[RadianceKey], stats: &mut ParticleStats) {
         let (Some(g), Some(lighting)) = (self.geometry.as_mut(), self.lighting.as_ref()) else { return };
         let t = Instant::now();
         let wanted = gather::particles_to_gather(&g.lists, keys, g.particles.len());
         let lazily = g.gather.ensure(Target::new(ctx, &g.particles, &g.grids), wanted.iter().copied());
-        self.pending.links_traced += lazily;
-        self.pending.links_built_lazily += lazily;
-        self.pending.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
+        stats.links_traced += lazily;
+        stats.links_built_lazily += lazily;
+        stats.geometry_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
         let gathered = gather::gather(&g.gather, lighting, &wanted, &g.particles);
-        self.pending.area_particles_gathered += wanted.len() as u64;
-        self.pending.gathering_ms += t.elapsed().as_secs_f64() * 1e3;
+        stats.area_particles_gathered += wanted.len() as u64;
+        stats.gathering_ms += t.elapsed().as_secs_f64() * 1e3;
 
         let t = Instant::now();
         let values = gather::estimate(&g.lists, keys, &gathered, &g.particles.areas, lighting.shares);
         self.estimates.store(keys, &values);
-        self.pending.radiance_particles_estimated += keys.len() as u64;
-        self.pending.estimation_ms += t.elapsed().as_secs_f64() * 1e3;
+        stats.radiance_particles_estimated += keys.len() as u64;
+        stats.estimation_ms += t.elapsed().as_secs_f64() * 1e3;
     }
 
     /// Each shaded sample's pixel, radiance (emission, direct light, and ρ/π times the indirect
     /// irradiance) and its noise-free part (without the sampled direct light), with the object hit.
-    pub(super) fn shade(&mut self, ctx: &RenderContext, samples: &[(usize, u64)]) -> Vec<Sampled> {
-        let shaded = self.trace(ctx, samples);
-        let indirect = self.indirect(ctx, &shaded);
+    pub(super) fn shade(
+        &mut self,
+        ctx: &RenderContext,
+        samples: &[(usize, u64)],
+        stats: &mut ParticleStats,
+    ) -> Vec<Sampled> {
+        let shaded = self.trace(ctx, samples, stats);
+        let indirect = self.indirect(ctx, &shaded, stats);
         let t = Instant::now();
         let out = shaded
             .par_iter()
@@ -192,7 +202,7 @@ impl ParticleGi {
                 Sampled { pixel: s.pixel, radiance: steady + s.direct, steady, object: s.sample.hit.map(|h| h.object) }
             })
             .collect();
-        self.pending.final_ms += t.elapsed().as_secs_f64() * 1e3;
+        stats.final_ms += t.elapsed().as_secs_f64() * 1e3;
         out
     }
 

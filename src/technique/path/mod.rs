@@ -57,7 +57,7 @@ pub(crate) mod packets;
 pub use length::{max_path_length, MAX_PATH_LENGTH, MIN_PATH_LENGTH};
 
 use super::registry::{Parameter, ParameterKind, TechniqueDescription, SPP};
-use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
+use super::{RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats, UpdateStats};
 use crate::embree::Isa;
 use crate::film::Film;
 use crate::scene::edits::SceneDelta;
@@ -253,14 +253,14 @@ impl Technique for PathTracer {
         "path"
     }
 
-    fn update(&mut self, _ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
+    fn update(&mut self, _ctx: &RenderContext, delta: &SceneDelta) -> Result<UpdateStats, TechniqueError> {
         if !delta.is_empty() {
             self.passes = 0;
         }
-        Ok(())
+        Ok(UpdateStats::default())
     }
 
-    fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
+    fn render(&mut self, ctx: &RenderContext, film: &mut Film, _: UpdateStats) -> Result<RenderStats, TechniqueError> {
         let LanePlan { max_path_length: l_m, mean_reflectance: rho, settings, queue } =
             self.config.lane_plan(ctx.scene, ctx.accel.scene().device().isa());
         let lane_context = PathContext { scene: ctx.scene, accel: ctx.accel, max_path_length: l_m };

@@ -586,7 +586,7 @@ mod tests {
             let mut run = CornellRun::new(&device, reuse);
             let mut updated = 0;
             for tick in 0..8u32 {
-                run.update(tick, 3);
+                let p: crate::technique::photon_reuse::PhotonStats = run.update(tick, 3).take();
                 let technique = &run.technique;
                 let store = technique.store.as_ref().expect("store");
                 let grid = &technique.grid;
@@ -594,7 +594,6 @@ mod tests {
                 assert_eq!(grid.len(), rebuilt.len(), "{reuse:?} tick {tick}");
                 assert!(grid.cell_keys() == rebuilt.cell_keys(), "{reuse:?} tick {tick}: cells differ");
                 assert_eq!(grid.power, rebuilt.power, "{reuse:?} tick {tick}");
-                let p = &technique.pending;
                 if tick > 0 && !p.grid_rebuilt {
                     updated += 1;
                     assert!(p.grid_added + p.grid_removed < grid.len() as u64, "{reuse:?} tick {tick}: {p:?}");

@@ -4,7 +4,7 @@
 use super::grid::{ChangedPhotons, PhotonGrid};
 use super::store::PathStore;
 use super::trace::Retrace;
-use super::{ms, PhotonReuse, Plan, REFINE_ALPHA};
+use super::{ms, PhotonReuse, PhotonStats, Plan, TickWork, REFINE_ALPHA};
 use crate::scene::edits::SceneDelta;
 use crate::scene::{Scene, SurfaceId};
 use crate::technique::RenderContext;
@@ -16,7 +16,7 @@ impl PhotonReuse {
     /// probabilistic progressive photon mapping): the next `refine` share of the paths of lights
     /// that never moved is emitted afresh, and the radius shrinks to r_k with
     /// r_k² = r₀² · Π_{i ≤ k} (i + α)/(i + 1), α = 2/3. Returns whether photons changed.
-    pub(super) fn refine(&mut self, ctx: &RenderContext, store: &mut PathStore, touched: &mut Vec<usize>) -> bool {
+    pub(super) fn refine(&mut self, ctx: &RenderContext, store: &mut PathStore, tick: &mut TickWork) -> bool {
         let count = (self.config.refine as f64 * store.paths as f64).ceil() as usize;
         if count == 0 || self.base_radius <= 0.0 {
             return false;
@@ -32,8 +32,8 @@ impl PhotonReuse {
         let k = self.refined as f32;
         self.shrink *= ((k + REFINE_ALPHA) / (k + 1.0)).sqrt();
         self.grid.radius = self.base_radius * self.shrink;
-        self.pending.refined = work.len() as u64;
-        self.retrace(ctx, store, &work, touched);
+        tick.stats.refined = work.len() as u64;
+        self.retrace(ctx, store, &work, tick);
         true
     }
 
@@ -50,7 +50,7 @@ impl PhotonReuse {
     /// The first pick needs only the number of photons the grid will hold, which is counted
     /// without building a grid (a throwaway grid of unit cells took as long as the real one:
     /// `docs/benchmarks.md`, stop 58).
-    pub(super) fn rebuild_grid(&mut self, scene: &Scene, store: &PathStore) {
+    pub(super) fn rebuild_grid(&mut self, scene: &Scene, store: &PathStore, stats: &mut PhotonStats) {
         let t = Instant::now();
         let radius = match self.config.radius {
             Some(r) => r,
@@ -69,9 +69,9 @@ impl PhotonReuse {
         self.grid = PhotonGrid::build(scene, store, radius);
         self.base_radius = radius;
         self.grid.radius = radius * self.shrink;
-        self.pending.grid_ms = ms(t);
-        self.pending.grid_rebuilt = true;
-        self.pending.grid_added = self.grid.len() as u64;
+        stats.grid_ms = ms(t);
+        stats.grid_rebuilt = true;
+        stats.grid_added = self.grid.len() as u64;
     }
 
     /// Brings the grid up to date with the paths this tick changed: in place, unless so many
@@ -83,19 +83,20 @@ impl PhotonReuse {
         scene: &Scene,
         store: &PathStore,
         mut touched: Vec<usize>,
+        stats: &mut PhotonStats,
     ) -> Option<ChangedPhotons> {
         if self.grid.radius <= 0.0 || touched.len() * 4 > store.paths {
-            self.rebuild_grid(scene, store);
+            self.rebuild_grid(scene, store, stats);
             return None;
         }
         let t = Instant::now();
         touched.par_sort_unstable();
         touched.dedup();
         let (u, changed) = self.grid.update(scene, store, &touched);
-        self.pending.grid_removed = u.removed;
-        self.pending.grid_added = u.added;
-        self.pending.grid_cells_touched = u.cells_touched;
-        self.pending.grid_ms = ms(t);
+        stats.grid_removed = u.removed;
+        stats.grid_added = u.added;
+        stats.grid_cells_touched = u.cells_touched;
+        stats.grid_ms = ms(t);
         Some(changed)
     }
 

@@ -108,7 +108,7 @@ pub use stats::PhotonStats;
 pub use store::{PathStore, PathWord, StoreMemory};
 
 use super::box_tree::BOX_SLACK;
-use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats};
+use super::{RayCounts, RenderContext, RenderStats, Technique, TechniqueError, TechniqueStats, UpdateStats};
 use crate::film::Film;
 use crate::scene::edits::{self, Aabb, SceneDelta};
 use crate::scene::Scene;
@@ -130,6 +130,14 @@ enum Plan {
     /// Only objects moved (or only photons changed) while the camera stood still: the kept
     /// pixels follow what the grid took out and put in (`pixels.rs`).
     Follow { changed: ChangedPhotons, boxes: Vec<Aabb>, moved: Vec<bool> },
+}
+
+/// One `update` call's record: the paths it changed (for the grid) and its figures. It lives
+/// for that call and its figures go on to `render`; none of it stays in the technique.
+#[derive(Default)]
+struct TickWork {
+    touched: Vec<usize>,
+    stats: PhotonStats,
 }
 
 /// The `photon_reuse` technique.
@@ -154,7 +162,6 @@ pub struct PhotonReuse {
     pixels: PixelCache,
     plan: Plan,
     passes: u64,
-    pending: PhotonStats,
 }
 
 /// α of the radius schedule: each still tick keeps this share of the photon density's growth
@@ -187,12 +194,11 @@ impl PhotonReuse {
             pixels: PixelCache::default(),
             plan: Plan::Full,
             passes: 0,
-            pending: PhotonStats::default(),
         })
     }
 
     /// First tick: assign paths to lights and trace them all.
-    fn build(&mut self, ctx: &RenderContext) -> PathStore {
+    fn build(&mut self, ctx: &RenderContext, tick: &mut TickWork) -> PathStore {
         let scene = ctx.scene;
         let n = self.config.paths as usize;
         let with_origins = scene.lights.iter().any(|l| l.mesh.is_some());
@@ -210,7 +216,7 @@ impl PhotonReuse {
         self.retrace_passes = 0;
         let all: Vec<(usize, Retrace)> =
             if scene.light_selection.is_some() { (0..n).map(|i| (i, Retrace::Emit)).collect() } else { Vec::new() };
-        self.retrace(ctx, &mut store, &all, &mut Vec::new());
+        self.retrace(ctx, &mut store, &all, tick);
         store
     }
 
@@ -226,14 +232,8 @@ impl PhotonReuse {
 
     /// Traces the given retraces in parallel, in chunks that bound temporary memory; fills and
     /// the rest are timed and counted apart.
-    fn retrace(
-        &mut self,
-        ctx: &RenderContext,
-        store: &mut PathStore,
-        work: &[(usize, Retrace)],
-        touched: &mut Vec<usize>,
-    ) {
-        touched.extend(work.iter().map(|&(path, _)| path));
+    fn retrace(&mut self, ctx: &RenderContext, store: &mut PathStore, work: &[(usize, Retrace)], tick: &mut TickWork) {
+        tick.touched.extend(work.iter().map(|&(path, _)| path));
         self.retrace_passes += 1;
         // Mark first (§4's replace flag and segment), so what is pending is visible in the word.
         for &(path, how) in work {
@@ -258,20 +258,21 @@ impl PhotonReuse {
                 rays += tails.iter().map(|t| t.rays).sum::<u64>();
                 trace::write_back(store, tails);
             }
+            let stats = &mut tick.stats;
             if is_fill {
-                self.pending.fill_rays += rays;
-                self.pending.fill_ms += ms(t);
+                stats.fill_rays += rays;
+                stats.fill_ms += ms(t);
             } else {
-                self.pending.retrace_rays += rays;
-                self.pending.trace_ms += ms(t);
+                stats.retrace_rays += rays;
+                stats.trace_ms += ms(t);
             }
         }
         let fully = work
             .iter()
             .filter(|(_, r)| matches!(r, Retrace::Emit | Retrace::Fill(_) | Retrace::KeepSegment(0)))
             .count() as u64;
-        self.pending.fully_retraced += fully;
-        self.pending.partly_retraced += work.len() as u64 - fully;
+        tick.stats.fully_retraced += fully;
+        tick.stats.partly_retraced += work.len() as u64 - fully;
     }
 }
 
@@ -280,32 +281,35 @@ impl Technique for PhotonReuse {
         "photon_reuse"
     }
 
-    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<(), TechniqueError> {
-        self.pending = PhotonStats::default();
+    fn update(&mut self, ctx: &RenderContext, delta: &SceneDelta) -> Result<UpdateStats, TechniqueError> {
+        let mut tick = TickWork::default();
         let lit = self.store.is_some() && self.dark_light_lit(ctx.scene, delta);
         if lit {
             self.store = None;
-            self.pending.reassigned = true;
+            tick.stats.reassigned = true;
         }
         match self.store.take() {
             None => {
-                let store = self.build(ctx);
-                self.rebuild_grid(ctx.scene, &store);
+                let store = self.build(ctx, &mut tick);
+                self.rebuild_grid(ctx.scene, &store, &mut tick.stats);
                 self.plan = Plan::Full;
                 self.store = Some(store);
             }
             Some(mut store) => {
-                let mut touched = Vec::new();
-                let changed = match self.update_paths(ctx, &mut store, delta, &mut touched) {
-                    true => self.refresh_grid(ctx.scene, &store, touched),
+                let changed = match self.update_paths(ctx, &mut store, delta, &mut tick) {
+                    true => self.refresh_grid(ctx.scene, &store, std::mem::take(&mut tick.touched), &mut tick.stats),
                     false => Some(ChangedPhotons::default()),
                 };
                 self.plan = self.plan(ctx.scene, delta, changed);
                 self.store = Some(store);
             }
         }
-        let Some(store) = self.store.as_ref() else { return Ok(()) };
-        let p = &mut self.pending;
+        if !delta.is_empty() {
+            self.passes = 0;
+        }
+        let mut stats = tick.stats;
+        let Some(store) = self.store.as_ref() else { return Ok(UpdateStats::new(stats)) };
+        let p = &mut stats;
         p.paths = store.paths as u64;
         p.untouched = p.paths.saturating_sub(p.partly_retraced + p.fully_retraced);
         p.store = store.memory();
@@ -320,19 +324,21 @@ impl Technique for PhotonReuse {
             p.distribution_chi2 = chi2;
             p.distribution_cells = cells;
         }
-        if !delta.is_empty() {
-            self.passes = 0;
-        }
-        Ok(())
+        Ok(UpdateStats::new(stats))
     }
 
     fn restarts_whole_film(&self, delta: &SceneDelta) -> bool {
         !delta.is_empty() && matches!(self.plan, Plan::Full)
     }
 
-    fn render(&mut self, ctx: &RenderContext, film: &mut Film) -> Result<RenderStats, TechniqueError> {
+    fn render(
+        &mut self,
+        ctx: &RenderContext,
+        film: &mut Film,
+        update: UpdateStats,
+    ) -> Result<RenderStats, TechniqueError> {
         let t = Instant::now();
-        let mut stats = std::mem::take(&mut self.pending);
+        let mut stats: PhotonStats = update.take();
         let rays = match std::mem::take(&mut self.plan) {
             Plan::Full => {
                 let mut rays = gather::RenderRays::default();

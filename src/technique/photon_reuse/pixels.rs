@@ -352,7 +352,7 @@ mod tests {
             let mut film = Film::new(run.scene.camera.width, run.scene.camera.height);
             let (mut followed, mut stale_caught) = (0, 0);
             for tick in 0..10u32 {
-                run.update(tick, 5);
+                let update = run.update(tick, 5);
                 let before = run.technique.pixels.clone();
                 let ctx = crate::technique::RenderContext {
                     scene: &run.scene,
@@ -360,7 +360,7 @@ mod tests {
                     seed: 5,
                     tick: tick as u64,
                 };
-                let stats = run.technique.render(&ctx, &mut film).expect("render");
+                let stats = run.technique.render(&ctx, &mut film, update).expect("render");
                 let TechniqueStats::PhotonReuse(s) = stats.detail else { panic!("photon_reuse stats") };
                 let (technique, scene) = (&mut run.technique, &run.scene);
                 assert_eq!(first_mismatch(technique, scene), None, "{reuse:?} tick {tick}");

@@ -76,10 +76,11 @@ impl CornellRun {
     }
 
     /// Applies tick `tick`'s edits (none on tick 0), commits them and updates the technique.
-    pub fn update(&mut self, tick: u32, seed: u64) {
+    /// Returns the update's figures, for the tick's render.
+    pub fn update(&mut self, tick: u32, seed: u64) -> crate::technique::UpdateStats {
         use crate::technique::Technique;
         let delta = self.apply_edits(tick);
         let ctx = crate::technique::RenderContext { scene: &self.scene, accel: &self.accel, seed, tick: tick as u64 };
-        self.technique.update(&ctx, &delta).expect("update");
+        self.technique.update(&ctx, &delta).expect("update")
     }
 }

@@ -7,7 +7,7 @@ use super::lights::{self, MappedLight, Moved};
 use super::store::PathStore;
 use super::trace::Retrace;
 use super::verify::{self, Changes, Standing, VerifyWork};
-use super::{error, ms, PhotonReuse, ReuseMode};
+use super::{error, ms, PhotonReuse, ReuseMode, TickWork};
 use crate::scene::edits::SceneDelta;
 use crate::technique::box_tree::BOX_SLACK;
 use crate::technique::RenderContext;
@@ -25,28 +25,28 @@ struct LightEdits {
 
 impl PhotonReuse {
     /// Steps 2–4 of a later tick. Returns whether any stored photon changed, and adds every
-    /// path it changed to `touched`.
+    /// path it changed to `tick.touched` and its figures to `tick.stats`.
     pub(super) fn update_paths(
         &mut self,
         ctx: &RenderContext,
         store: &mut PathStore,
         delta: &SceneDelta,
-        touched: &mut Vec<usize>,
+        tick: &mut TickWork,
     ) -> bool {
-        let edits = self.light_edits(ctx, store, delta, touched);
+        let edits = self.light_edits(ctx, store, delta, tick);
         let transport_changed = !delta.moved.is_empty() || !delta.lights.is_empty() || !delta.materials.is_empty();
         let settling = self.maps.iter().flatten().any(|m| !m.map.settled());
         if transport_changed || settling {
             self.restore_radius();
         } else {
-            return self.refine(ctx, store, touched);
+            return self.refine(ctx, store, tick);
         }
         if self.config.reuse == ReuseMode::Off {
             if !transport_changed {
                 return false;
             }
             let all: Vec<(usize, Retrace)> = (0..store.paths).map(|i| (i, Retrace::Emit)).collect();
-            self.retrace(ctx, store, &all, touched);
+            self.retrace(ctx, store, &all, tick);
             return true;
         }
         let mut plan: Vec<Option<Retrace>> = vec![None; store.paths];
@@ -54,24 +54,24 @@ impl PhotonReuse {
         let mut changed = edits.rescaled;
 
         let t = Instant::now();
-        let (valid_of_light, moved) = self.update_origins(ctx, store, &edits, (&mut plan, &mut standing), touched);
+        let (valid_of_light, moved) = self.update_origins(ctx, store, &edits, (&mut plan, &mut standing), tick);
         changed |= moved;
-        self.pending.origins_ms = ms(t);
+        tick.stats.origins_ms = ms(t);
 
         // Dynamic occlusions against moved surfaces and edited materials.
         let t = Instant::now();
         if !delta.moved.is_empty() || !delta.materials.is_empty() {
-            changed |= self.verify(ctx, store, delta, &mut plan, &standing, touched);
+            changed |= self.verify(ctx, store, delta, &mut plan, &standing, tick);
         }
-        self.pending.verify_ms = ms(t);
+        tick.stats.verify_ms = ms(t);
 
         let t = Instant::now();
-        self.prune_and_fill(ctx, store, valid_of_light, &mut plan);
-        self.pending.prune_ms = ms(t);
+        self.prune_and_fill(ctx, store, valid_of_light, &mut plan, tick);
+        tick.stats.prune_ms = ms(t);
 
         let work: Vec<(usize, Retrace)> = plan.into_iter().enumerate().filter_map(|(i, r)| r.map(|r| (i, r))).collect();
         if !work.is_empty() {
-            self.retrace(ctx, store, &work, touched);
+            self.retrace(ctx, store, &work, tick);
             changed = true;
         }
         changed
@@ -85,7 +85,7 @@ impl PhotonReuse {
         ctx: &RenderContext,
         store: &mut PathStore,
         delta: &SceneDelta,
-        touched: &mut Vec<usize>,
+        tick: &mut TickWork,
     ) -> LightEdits {
         let lights = ctx.scene.lights.len();
         let mut edits = LightEdits { reemit: vec![false; lights], moved_from: vec![None; lights], rescaled: false };
@@ -94,8 +94,8 @@ impl PhotonReuse {
             match (change.emission_changed, change.rescale) {
                 (true, Some(factor)) if reuse => {
                     let paths = lights::rescale(store, change.light, factor);
-                    self.pending.rescaled += paths.len() as u64;
-                    touched.extend(paths);
+                    tick.stats.rescaled += paths.len() as u64;
+                    tick.touched.extend(paths);
                     edits.rescaled = true;
                 }
                 (true, _) => {
@@ -121,7 +121,7 @@ impl PhotonReuse {
         store: &mut PathStore,
         edits: &LightEdits,
         (plan, standing): (&mut [Option<Retrace>], &mut [Standing]),
-        touched: &mut Vec<usize>,
+        tick: &mut TickWork,
     ) -> (Vec<Option<Vec<bool>>>, bool) {
         let mut changed = false;
         let mut valid_of_light: Vec<Option<Vec<bool>>> = vec![None; edits.reemit.len()];
@@ -134,7 +134,7 @@ impl PhotonReuse {
                 continue;
             }
             if let Some(old) = edits.moved_from[l] {
-                *valid = self.move_light(ctx, store, l, old, plan, standing, touched);
+                *valid = self.move_light(ctx, store, l, old, plan, standing, tick);
                 changed = true;
             } else if let Some(m) = self.maps[l].as_ref().filter(|m| !m.map.settled()) {
                 *valid = Some(m.slots.clone().map(|s| !store.emit_power[s].is_black()).collect());
@@ -151,12 +151,13 @@ impl PhotonReuse {
         store: &PathStore,
         valid_of_light: Vec<Option<Vec<bool>>>,
         plan: &mut [Option<Retrace>],
+        tick: &mut TickWork,
     ) {
         for (l, valid) in valid_of_light.into_iter().enumerate() {
             let (Some(valid), Some(m)) = (valid, self.maps[l].as_mut()) else { continue };
             let b = lights::balance(m, store, &valid, ctx.seed, ctx.tick, l);
-            self.pending.pruned += b.pruned;
-            self.pending.filled += b.filled;
+            tick.stats.pruned += b.pruned;
+            tick.stats.filled += b.filled;
             for (slot, how) in b.work {
                 plan[slot] = Some(how);
             }
@@ -173,7 +174,7 @@ impl PhotonReuse {
         old: Affine3A,
         plan: &mut [Option<Retrace>],
         standing: &mut [Standing],
-        touched: &mut Vec<usize>,
+        tick: &mut TickWork,
     ) -> Option<Vec<bool>> {
         let frame = EmissionFrame::of(ctx.scene, l, self.config.distribution_map)?;
         let mapped = match self.maps[l].take() {
@@ -193,11 +194,11 @@ impl PhotonReuse {
             .collect();
         let mut valid = Vec::with_capacity(moved.len());
         for (slot, (outcome, rays)) in mapped.slots.clone().zip(moved) {
-            self.pending.origin_rays += rays;
+            tick.stats.origin_rays += rays;
             match outcome {
                 Moved::Kept { origin, dir, scale, cell, retrace } => {
                     if lights::apply_moved(store, slot, origin, dir, scale, cell) {
-                        touched.push(slot);
+                        tick.touched.push(slot);
                     }
                     valid.push(true);
                     plan[slot] = retrace;
@@ -221,7 +222,7 @@ impl PhotonReuse {
         delta: &SceneDelta,
         plan: &mut [Option<Retrace>],
         standing: &[Standing],
-        touched: &mut Vec<usize>,
+        tick: &mut TickWork,
     ) -> bool {
         let scene = ctx.scene;
         let diagonal = ctx.accel.scene().bounds().map_or(1.0, |(lo, hi)| (hi - lo).length());
@@ -232,15 +233,15 @@ impl PhotonReuse {
         let changes = changes.with_geometry(ctx.accel, delta);
         let t = Instant::now();
         let (screened, screen_tests) = verify::screen(scene, store, &changes, standing);
-        self.pending.screen_ms = ms(t);
-        self.pending.screened = screened.len() as u64;
-        self.pending.verify_box_tests += screen_tests;
+        tick.stats.screen_ms = ms(t);
+        tick.stats.screened = screened.len() as u64;
+        tick.stats.verify_box_tests += screen_tests;
         if self.config.reuse == ReuseMode::Naive {
             let (work, failed) = check_all(&screened, |i, mask| {
                 let (retrace, work) = verify::check_path(scene, store, i, &changes, mask);
                 (work, retrace)
             });
-            self.pending.count_verification(work);
+            tick.stats.count_verification(work);
             for (i, r) in failed {
                 plan[i] = Some(r);
             }
@@ -252,11 +253,11 @@ impl PhotonReuse {
             let decided = c.outcome != error::Outcome::Valid || !c.moved.is_empty();
             (c.work, decided.then_some(c))
         });
-        self.pending.count_verification(work);
+        tick.stats.count_verification(work);
         let moved_photons = !decided.is_empty();
         for (i, c) in decided {
             plan[i] = error::apply(store, i, c);
-            touched.push(i);
+            tick.touched.push(i);
         }
         moved_photons
     }
