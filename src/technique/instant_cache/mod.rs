@@ -115,7 +115,7 @@ use crate::scene::Scene;
 use cache::Cache;
 use cameras::{CameraChange, Reuse, Samples, Shaded};
 use glam::Vec3;
-use pixels::SampleState;
+use pixels::{PassStates, SampleState};
 use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
@@ -147,7 +147,7 @@ pub struct InstantCache {
     still: bool,
     /// Each pass's samples and their interpolation (`pixels.rs`), from the last tick (`static`
     /// keeps only their allocations).
-    samples: Vec<Vec<SampleState>>,
+    samples: Vec<PassStates>,
     /// What this tick renders: the resident generation, a refinement, or nothing.
     kind: TickKind,
     /// `temporal`: each pass's camera samples from the last resident tick, and what may have
@@ -179,7 +179,7 @@ enum TickKind {
 struct Layer {
     vpls: Vec<Vpl>,
     cache: Option<Cache>,
-    samples: Vec<Vec<SampleState>>,
+    samples: Vec<PassStates>,
 }
 
 impl InstantCache {
@@ -319,8 +319,8 @@ impl InstantCache {
             cache.clear();
         }
         // `static` keeps the states too, for their allocations, but not their lists.
-        self.samples.resize_with(self.config.spp as usize, Vec::new);
-        let mut states = std::mem::take(&mut self.samples[k]);
+        self.samples.resize_with(self.config.spp as usize, PassStates::default);
+        let mut states = std::mem::take(&mut self.samples[k].states);
         if states.len() != shaded.len() {
             states = vec![SampleState::default(); shaded.len()];
         }
@@ -330,7 +330,7 @@ impl InstantCache {
             if let Some(indirect) = pixels::all_kept(&states, kept) {
                 stats.records_reused += pixels::mark_used(cache, None, cache.records.len(), ctx.tick);
                 stats.samples_reused += indirect.iter().filter(|e| e.is_some()).count() as u64;
-                self.samples[k] = states;
+                self.samples[k].states = states;
                 return indirect;
             }
         }
@@ -364,7 +364,7 @@ impl InstantCache {
             stats.audit_samples_mismatched += audit.mismatched;
             stats.audit_samples_needed += audit.needed;
         }
-        self.samples[k] = states;
+        self.samples[k] = PassStates { states, bytes: out.bytes };
         out.indirect
     }
 

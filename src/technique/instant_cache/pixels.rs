@@ -40,6 +40,14 @@ pub struct SampleState {
     pub indirect: Option<Rgb>,
 }
 
+/// One pass's sample states and the bytes they hold, counted by the pass that last changed them
+/// ([`interpolate_all`]), so a tick that changes no list (a still or idle one) counts nothing.
+#[derive(Clone, Debug, Default)]
+pub struct PassStates {
+    pub states: Vec<SampleState>,
+    pub bytes: u64,
+}
+
 /// Bytes a sample's state holds besides its weights.
 pub const STATE_BYTES: u64 = std::mem::size_of::<SampleState>() as u64;
 /// Bytes per weight entry.
@@ -248,6 +256,8 @@ pub struct Interpolated {
     pub hits: u64,
     pub kept: u64,
     pub used: Vec<bool>,
+    /// Bytes the states hold, with their weight lists.
+    pub bytes: u64,
 }
 
 /// Each sample's irradiance: kept when `still` (no record's irradiance changed) and the sample
@@ -257,12 +267,13 @@ pub struct Interpolated {
 pub fn interpolate_all(records: &[Record], states: &mut [SampleState], looked: &[bool], still: bool) -> Interpolated {
     let used = AtomicFlags::new(records.len());
     let irradiance: Vec<Rgb> = records.iter().map(|r| r.irradiance).collect();
-    let (indirect, kept): (Vec<Option<Rgb>>, Vec<bool>) = states
+    let (indirect, kept): (Vec<Option<Rgb>>, Vec<(bool, u64)>) = states
         .par_iter_mut()
         .zip(looked)
         .map(|(state, &looked)| {
+            let bytes = STATE_BYTES + state.weights.capacity() as u64 * WEIGHT_BYTES;
             if state.hit.is_none() {
-                return (None, false);
+                return (None, (false, bytes));
             }
             let keep = still && !looked && state.indirect.is_some();
             if keep {
@@ -270,12 +281,13 @@ pub fn interpolate_all(records: &[Record], states: &mut [SampleState], looked: &
             } else {
                 state.indirect = Some(interpolate(&irradiance, &state.weights, &used));
             }
-            (state.indirect, keep)
+            (state.indirect, (keep, bytes))
         })
         .unzip();
     let hits = indirect.par_iter().filter(|e| e.is_some()).count() as u64;
-    let kept = kept.par_iter().filter(|&&k| k).count() as u64;
-    Interpolated { indirect, hits, kept, used: used.into_vec() }
+    let (kept, bytes) =
+        kept.par_iter().map(|&(k, b)| (u64::from(k), b)).reduce(|| (0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+    Interpolated { indirect, hits, kept, used: used.into_vec(), bytes }
 }
 
 /// The records some sample's list holds, as flags by index.
@@ -285,9 +297,9 @@ pub fn used(records: usize, states: &[SampleState]) -> Vec<bool> {
     flags.into_vec()
 }
 
-/// Bytes the samples' states hold.
-pub fn samples_bytes(samples: &[Vec<SampleState>]) -> u64 {
-    samples.iter().flatten().map(|s| STATE_BYTES + s.weights.capacity() as u64 * WEIGHT_BYTES).sum()
+/// Bytes the passes' states hold, as their passes last counted them.
+pub fn samples_bytes(passes: &[PassStates]) -> u64 {
+    passes.iter().map(|p| p.bytes).sum()
 }
 
 /// Marks the records the samples use (`used`, flags by index) as used at `tick` and returns
