@@ -27,7 +27,7 @@ fn transformed_cornell(scale: f32, offset: [f32; 3]) -> Scene {
 }
 
 fn render_path(scene: Scene) -> LinearImage {
-    render(scene, TechniqueConfig::Path(path(64)), 11, 1, 2).image
+    std::sync::Arc::unwrap_or_clone(render(scene, TechniqueConfig::Path(path(64)), 11, 1, 2).image)
 }
 
 #[test]

@@ -178,3 +178,39 @@ fn an_animation_hold_accumulates_and_converges() {
     eprintln!("hold: relMSE after 1 tick {early:.4}, after 31 ticks {late:.4}");
     assert!(late < 0.5 * early, "the hold did not converge: {early} -> {late}");
 }
+
+/// A tick that leaves the film as it was resolves nothing: an `instant_cache` view at rest
+/// (refinement done, no pass added) shares the last tick's image, with `resolve_reused`. Every
+/// frame equals a fresh resolve of the film after its tick, so a shared image is never stale;
+/// the ticks that add a pass, and the tick after a move, resolve. Control: `path` adds a pass
+/// every tick and resolves every tick.
+#[test]
+fn a_tick_that_leaves_the_film_as_it_was_resolves_nothing() {
+    let device = relume::embree::Device::new(2).expect("device");
+    let pool = relume::engine::thread_pool(2).expect("pool");
+    pool.install(|| {
+        let run = |spec: &str| -> Vec<(Frame, relume::film::LinearImage)> {
+            let config = TechniqueConfig::from_spec(spec).expect("spec");
+            let mut session = Session::new(room(), &config, 1, &device).expect("session");
+            let mut frames = Vec::new();
+            for k in 0..6 {
+                if k == 5 {
+                    session.queue_edits(nudge(session.scene())).expect("valid edit");
+                }
+                let frame = session.tick().expect("tick");
+                frames.push((frame, session.film().resolve()));
+            }
+            frames
+        };
+        let resting = run("instant_cache:temporal:refine_ticks=2");
+        let reused: Vec<bool> = resting.iter().map(|(f, _)| f.stats.resolve_reused).collect();
+        assert_eq!(reused, [false, false, false, true, true, false], "ticks 3 and 4 rest");
+        for (frame, fresh) in &resting {
+            assert!(*frame.image == *fresh, "tick {}: the frame is not the film's image", frame.tick);
+        }
+        assert!(std::sync::Arc::ptr_eq(&resting[4].0.image, &resting[2].0.image), "a resting tick copied the image");
+        assert!(resting[5].0.image != resting[4].0.image, "the move changed nothing in the image");
+        let path = run("path:spp=1");
+        assert!(path.iter().all(|(f, _)| !f.stats.resolve_reused), "path's film changes every tick");
+    });
+}

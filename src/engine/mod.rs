@@ -10,6 +10,8 @@
 //!    when anything changed, unless the technique restarts only the pixels the change touched.
 //! 5. **Render** on rayon.
 //! 6. **Resolve** the film into a linear image; encoding happens where the frame is consumed.
+//!    A film unchanged since the last tick ([`Film::version`]) is not resolved again: the last
+//!    image stands, shared (`resolve_reused`).
 //! 7. **Denoise**, when the session asks for it ([`Session::enable_denoise`]): OIDN on the
 //!    resolved image, guided by auxiliary images ([`DenoiseStage`]); the raw image stays in the
 //!    frame beside the denoised one. A film unchanged since the last tick ([`Film::version`])
@@ -24,10 +26,11 @@ pub use denoise::{AuxWork, DenoiseStage};
 pub use stats::{PhaseTimes, TickStats};
 
 use crate::embree::{self, Device, EmbreeError};
-use crate::film::{bilateral_filter, DenoiseError, DenoiseSettings, Film, LinearImage};
+use crate::film::{bilateral_filter, DenoiseError, DenoiseSettings, Film, FilmVersion, LinearImage};
 use crate::scene::edits::{self, Edit, SceneDelta};
 use crate::scene::{Scene, SceneAccel, SceneError};
 use crate::technique::{self, RenderContext, Technique, TechniqueConfig, TechniqueError};
+use std::sync::Arc;
 use std::time::Instant;
 use thiserror::Error;
 
@@ -52,8 +55,8 @@ pub struct Frame {
     pub accumulation_id: u64,
     /// Render passes accumulated since the last reset.
     pub spp: u32,
-    /// The raw resolved image.
-    pub image: LinearImage,
+    /// The raw resolved image (shared with the session while the film stays as it is).
+    pub image: Arc<LinearImage>,
     /// The denoised image, when the session denoises.
     pub denoised: Option<LinearImage>,
     pub stats: TickStats,
@@ -96,6 +99,8 @@ pub struct Session {
     /// Sequence number of the last accepted edit batch (the first is 1).
     accepted_batches: u64,
     denoise: Option<DenoiseStage>,
+    /// The last resolved (and preview-filtered) image and the film version it shows.
+    resolved: Option<(FilmVersion, Arc<LinearImage>)>,
     /// Set by [`Session::resume`]: the next tick's stats say the session was restored.
     restored: bool,
 }
@@ -131,6 +136,7 @@ impl Session {
             pending_received: 0,
             accepted_batches: 0,
             denoise: None,
+            resolved: None,
             restored: false,
         })
     }
@@ -255,10 +261,7 @@ impl Session {
         times.render_ms = ms(t);
 
         let t = Instant::now();
-        let mut image = self.film.resolve();
-        if let Some(f) = self.technique.preview_filter() {
-            image = bilateral_filter(&image, f.sigma_spatial_px, f.sigma_range);
-        }
+        let (image, resolve_reused) = self.resolve();
         times.resolve_ms = ms(t);
 
         // Denoise, keeping the raw image.
@@ -282,6 +285,7 @@ impl Session {
             accumulation_id: self.film.accumulation_id,
             aux_rays: aux.rays,
             denoise_reused: aux.reused,
+            resolve_reused,
             restored: std::mem::take(&mut self.restored),
             detail: render.detail,
         };
@@ -295,6 +299,22 @@ impl Session {
         };
         self.tick += 1;
         Ok(frame)
+    }
+
+    /// The film as an image (preview-filtered if the technique asks), and whether it is the last
+    /// tick's: an unchanged film version resolves to the same image.
+    fn resolve(&mut self) -> (Arc<LinearImage>, bool) {
+        let version = self.film.version();
+        if let Some((_, image)) = self.resolved.as_ref().filter(|(v, _)| *v == version) {
+            return (Arc::clone(image), true);
+        }
+        let mut image = self.film.resolve();
+        if let Some(f) = self.technique.preview_filter() {
+            image = bilateral_filter(&image, f.sigma_spatial_px, f.sigma_range);
+        }
+        let image = Arc::new(image);
+        self.resolved = Some((version, Arc::clone(&image)));
+        (image, false)
     }
 
     /// The denoised image when the session denoises, and what the stage did (its auxiliary

@@ -47,6 +47,10 @@ pub struct TickStats {
     /// the auxiliary images) changed since. Absent otherwise.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub denoise_reused: bool,
+    /// True when the film was as the last tick left it, so its image was not resolved again:
+    /// the frame shares the last tick's image. Absent otherwise.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub resolve_reused: bool,
     /// True on the first tick after a restore from a snapshot: the technique rebuilt (retraced)
     /// its state. Absent otherwise.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]

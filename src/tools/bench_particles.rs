@@ -188,7 +188,7 @@ fn link_update(
         })?;
         runs.push(figures);
     }
-    let moving = |f: &[(ParticleStats, crate::film::LinearImage)], x: fn(&ParticleStats) -> f64| {
+    let moving = |f: &[(ParticleStats, std::sync::Arc<crate::film::LinearImage>)], x: fn(&ParticleStats) -> f64| {
         quantile(&f[1..].iter().map(|(s, _)| x(s)).collect::<Vec<_>>(), 0.5)
     };
     let (inc, full) = (&runs[0], &runs[1]);

@@ -118,7 +118,7 @@ fn render_still(args: &RenderArgs) -> Result<()> {
             eprintln!("denoised ({}) in {:.0} ms", settings.quality.name(), t.elapsed().as_secs_f64() * 1e3);
             denoised
         }
-        None => frame.image.clone(),
+        None => std::sync::Arc::unwrap_or_clone(frame.image),
     };
     write_image(&image, &args.out, args.exposure)?;
     let mean = image.mean();

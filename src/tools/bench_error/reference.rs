@@ -97,7 +97,7 @@ fn render_half(
         last = Some(session.tick()?);
         bar.inc(SPP_PER_TICK.min(spp) as u64);
     }
-    Ok(last.context("no reference tick ran")?.image)
+    Ok(std::sync::Arc::unwrap_or_clone(last.context("no reference tick ran")?.image))
 }
 
 /// The cached reference for `key`, rendering and storing it if missing. Also returns whether

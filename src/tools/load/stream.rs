@@ -281,6 +281,7 @@ mod tests {
             accumulation_id: 0,
             aux_rays: 0,
             denoise_reused: false,
+            resolve_reused: false,
             restored: false,
             detail: crate::technique::TechniqueStats::Path(Default::default()),
         };
