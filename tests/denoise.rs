@@ -124,7 +124,7 @@ fn raw_image_equals_a_twin_without_denoising() {
     let (without, _) = run(3, 2, None);
     assert_eq!(with.image, without.image, "denoising changed the raw image");
     assert!(without.denoised.is_none());
-    assert_ne!(with.denoised.as_ref(), Some(&*with.image), "the denoised image is the raw one");
+    assert_ne!(with.denoised.as_deref(), Some(&*with.image), "the denoised image is the raw one");
     assert!(with.stats.times.denoise_ms > 0.0 && without.stats.times.denoise_ms == 0.0);
 }
 
@@ -173,7 +173,7 @@ fn kept_auxiliary_images_denoise_like_freshly_traced_ones() {
         .flat_map(|(a, b)| (*a - *b).to_array().map(f32::abs))
         .fold(0.0, f32::max);
     assert!(worst < 1e-5, "kept auxiliary images differ from fresh ones by {worst}");
-    assert_ne!(denoised, &colour_only, "control: the auxiliary images change nothing");
+    assert_ne!(&**denoised, &colour_only, "control: the auxiliary images change nothing");
 }
 
 /// A tick that changes nothing in the film is not denoised again: an `instant_cache` view at

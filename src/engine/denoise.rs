@@ -16,6 +16,7 @@ use crate::scene::{Scene, SceneAccel};
 use crate::technique::camera_chain;
 use glam::Vec3;
 use rayon::prelude::*;
+use std::sync::Arc;
 
 /// Keys the auxiliary pass's random streams apart from every technique's.
 const AUX_STREAM: u64 = 0xA0C5_11A2_D1E5_0153;
@@ -27,7 +28,7 @@ pub struct DenoiseStage {
     /// The denoiser holds the current auxiliary images (none added or reset since it got them).
     aux_sent: bool,
     /// The last tick's output and the version of the film it came from.
-    last: Option<(FilmVersion, LinearImage)>,
+    last: Option<(FilmVersion, Arc<LinearImage>)>,
 }
 
 /// What one tick's denoise stage did.
@@ -101,13 +102,14 @@ impl DenoiseStage {
         seed: u64,
         image: &LinearImage,
         version: FilmVersion,
-    ) -> Result<(LinearImage, AuxWork), DenoiseError> {
+    ) -> Result<(Arc<LinearImage>, AuxWork), DenoiseError> {
         let aux_done = self.aux_sent && (!self.settings().aux || self.aux.converged());
         if let Some((_, output)) = self.last.as_ref().filter(|(v, _)| aux_done && *v == version) {
-            return Ok((output.clone(), AuxWork { rays: 0, reused: true }));
+            return Ok((Arc::clone(output), AuxWork { rays: 0, reused: true }));
         }
         let (output, work) = self.run(scene, accel, seed, image, 1)?;
-        self.last = Some((version, output.clone()));
+        let output = Arc::new(output);
+        self.last = Some((version, Arc::clone(&output)));
         Ok((output, work))
     }
 

@@ -57,8 +57,9 @@ pub struct Frame {
     pub spp: u32,
     /// The raw resolved image (shared with the session while the film stays as it is).
     pub image: Arc<LinearImage>,
-    /// The denoised image, when the session denoises.
-    pub denoised: Option<LinearImage>,
+    /// The denoised image, when the session denoises (shared with the denoise stage while the
+    /// film stays as it is).
+    pub denoised: Option<Arc<LinearImage>>,
     pub stats: TickStats,
 }
 
@@ -82,6 +83,14 @@ pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, EngineError> {
         .map_err(|e| EngineError::ThreadPool(e.to_string()))
 }
 
+/// What the resolve step makes of a film: its image, shared by the frames that show it, and
+/// the mean paths per pixel.
+#[derive(Clone)]
+struct Resolved {
+    image: Arc<LinearImage>,
+    paths_per_pixel: f64,
+}
+
 /// One scene, its light transport and its film, ticking.
 pub struct Session {
     scene: Scene,
@@ -99,8 +108,8 @@ pub struct Session {
     /// Sequence number of the last accepted edit batch (the first is 1).
     accepted_batches: u64,
     denoise: Option<DenoiseStage>,
-    /// The last resolved (and preview-filtered) image and the film version it shows.
-    resolved: Option<(FilmVersion, Arc<LinearImage>)>,
+    /// The last resolve, and the film version it shows.
+    resolved: Option<(FilmVersion, Resolved)>,
     /// Set by [`Session::resume`]: the next tick's stats say the session was restored.
     restored: bool,
 }
@@ -261,7 +270,7 @@ impl Session {
         times.render_ms = ms(t);
 
         let t = Instant::now();
-        let (image, resolve_reused) = self.resolve();
+        let (Resolved { image, paths_per_pixel }, resolve_reused) = self.resolve();
         times.resolve_ms = ms(t);
 
         // Denoise, keeping the raw image.
@@ -281,7 +290,7 @@ impl Session {
             edits_applied_through: self.accepted_batches,
             moved_surfaces: delta.moved.len(),
             spp: self.film.passes,
-            paths_per_pixel: self.film.mean_paths_per_pixel(),
+            paths_per_pixel,
             accumulation_id: self.film.accumulation_id,
             aux_rays: aux.rays,
             denoise_reused: aux.reused,
@@ -301,25 +310,26 @@ impl Session {
         Ok(frame)
     }
 
-    /// The film as an image (preview-filtered if the technique asks), and whether it is the last
-    /// tick's: an unchanged film version resolves to the same image.
-    fn resolve(&mut self) -> (Arc<LinearImage>, bool) {
+    /// The film as an image (preview-filtered if the technique asks) and its mean paths per
+    /// pixel, and whether they are the last tick's: an unchanged film version resolves to the
+    /// same image.
+    fn resolve(&mut self) -> (Resolved, bool) {
         let version = self.film.version();
-        if let Some((_, image)) = self.resolved.as_ref().filter(|(v, _)| *v == version) {
-            return (Arc::clone(image), true);
+        if let Some((_, last)) = self.resolved.as_ref().filter(|(v, _)| *v == version) {
+            return (last.clone(), true);
         }
         let mut image = self.film.resolve();
         if let Some(f) = self.technique.preview_filter() {
             image = bilateral_filter(&image, f.sigma_spatial_px, f.sigma_range);
         }
-        let image = Arc::new(image);
-        self.resolved = Some((version, Arc::clone(&image)));
-        (image, false)
+        let resolved = Resolved { image: Arc::new(image), paths_per_pixel: self.film.mean_paths_per_pixel() };
+        self.resolved = Some((version, resolved.clone()));
+        (resolved, false)
     }
 
     /// The denoised image when the session denoises, and what the stage did (its auxiliary
     /// rays; whether it reused the last output because the film had not changed).
-    fn denoise_step(&mut self, image: &LinearImage) -> Result<(Option<LinearImage>, AuxWork), EngineError> {
+    fn denoise_step(&mut self, image: &LinearImage) -> Result<(Option<Arc<LinearImage>>, AuxWork), EngineError> {
         match &mut self.denoise {
             Some(stage) => {
                 let (denoised, work) = stage.tick(&self.scene, &self.accel, self.seed, image, self.film.version())?;
