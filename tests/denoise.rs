@@ -202,6 +202,9 @@ fn an_unchanged_film_is_not_denoised_again() {
         assert_eq!(reused, [false, false, false, true, true, false], "ticks 3 and 4 rest");
         let spp: Vec<u32> = resting.iter().map(|f| f.spp).collect();
         assert_eq!(spp, [1, 2, 3, 3, 3, 1], "the resting ticks added a pass");
+        // The resting frames name the tick that made their images, so clients can tell them apart.
+        let made: Vec<(u64, u64)> = resting.iter().map(|f| (f.image_tick, f.denoised_tick)).collect();
+        assert_eq!(made, [(0, 0), (1, 1), (2, 2), (2, 2), (2, 2), (5, 5)], "the ticks that made each frame's images");
         for f in &resting[3..5] {
             assert_eq!(f.denoised.as_ref().map(|d| &d.pixels), resting[2].denoised.as_ref().map(|d| &d.pixels));
         }

@@ -301,6 +301,47 @@ async fn frames_are_encoded_once_per_tick_and_format_and_revalidate_by_etag() {
     assert_eq!(encoded(), before_tick + 1, "each subscriber encoded its own copy");
 }
 
+/// A view at rest costs its clients nothing: the frames of ticks that left the film as it was
+/// (an `instant_cache` view after its refinement) are the same image, so they share one
+/// encoding and one ETag, and a client holding the last frame gets 304 for the next. Each
+/// tick's frame is fetched after that tick. Control: `path` adds a pass every tick, so each
+/// tick's frame has its own ETag and encoding.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_frames_of_a_view_at_rest_share_one_encoding_and_etag() {
+    use std::sync::atomic::Ordering;
+    let s = TestServer::start(None, Limits::default()).await;
+    let encoded = || s.state.metrics.frames_encoded.load(Ordering::Relaxed);
+    // Per tick: the frame's ETag, the status of a GET sending the last tick's ETag, and the
+    // encodings that GET (and a plain one) made.
+    let run = |technique: Value| async {
+        let mut body = small("cornell-box");
+        body["technique"] = technique;
+        let id = s.session(body).await;
+        let mut seen: Vec<(String, u16, u64)> = Vec::new();
+        for tick in 0..5 {
+            s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
+            let url = s.url(&format!("/v1/sessions/{id}/frame.png?tick={tick}"));
+            let before = encoded();
+            let mut conditional = s.http.get(url.clone());
+            if let Some((etag, _, _)) = seen.last() {
+                conditional = conditional.header("if-none-match", etag.clone());
+            }
+            let status = conditional.send().await.unwrap().status().as_u16();
+            let plain = s.http.get(url).send().await.unwrap();
+            let etag = plain.headers()["etag"].to_str().unwrap().to_string();
+            seen.push((etag, status, encoded() - before));
+        }
+        seen
+    };
+    let resting = run(json!({"id": "instant_cache", "refine_ticks": 2})).await;
+    let statuses: Vec<u16> = resting.iter().map(|r| r.1).collect();
+    assert_eq!(statuses, [200, 200, 200, 304, 304], "ticks 3 and 4 rest: {resting:?}");
+    assert!(resting[2].0 == resting[3].0 && resting[3].0 == resting[4].0, "{resting:?}");
+    assert_eq!(resting.iter().map(|r| r.2).collect::<Vec<_>>(), [1, 1, 1, 0, 0], "a resting frame encoded again");
+    let path = run(json!({"id": "path", "spp": 1})).await;
+    assert!(path.iter().skip(1).all(|r| r.1 == 200 && r.2 == 1), "path's frames change every tick: {path:?}");
+}
+
 #[tokio::test]
 async fn every_response_names_its_node_and_session_ids_start_with_it() {
     // Property: a proxy can route by the session id's node prefix and check which node

@@ -57,9 +57,14 @@ pub struct Frame {
     pub spp: u32,
     /// The raw resolved image (shared with the session while the film stays as it is).
     pub image: Arc<LinearImage>,
+    /// The tick that resolved `image`: this one, or an earlier one when the film has not
+    /// changed since (so frames with the same `image_tick` show the same image).
+    pub image_tick: u64,
     /// The denoised image, when the session denoises (shared with the denoise stage while the
     /// film stays as it is).
     pub denoised: Option<Arc<LinearImage>>,
+    /// The tick that denoised `denoised` (as `image_tick` is for `image`).
+    pub denoised_tick: u64,
     pub stats: TickStats,
 }
 
@@ -83,12 +88,13 @@ pub fn thread_pool(threads: usize) -> Result<rayon::ThreadPool, EngineError> {
         .map_err(|e| EngineError::ThreadPool(e.to_string()))
 }
 
-/// What the resolve step makes of a film: its image, shared by the frames that show it, and
-/// the mean paths per pixel.
+/// What the resolve step makes of a film: its image, shared by the frames that show it, the
+/// mean paths per pixel, and the tick that resolved them.
 #[derive(Clone)]
 struct Resolved {
     image: Arc<LinearImage>,
     paths_per_pixel: f64,
+    tick: u64,
 }
 
 /// One scene, its light transport and its film, ticking.
@@ -110,6 +116,8 @@ pub struct Session {
     denoise: Option<DenoiseStage>,
     /// The last resolve, and the film version it shows.
     resolved: Option<(FilmVersion, Resolved)>,
+    /// The tick that made the denoise stage's current output.
+    denoised_tick: u64,
     /// Set by [`Session::resume`]: the next tick's stats say the session was restored.
     restored: bool,
 }
@@ -146,6 +154,7 @@ impl Session {
             accepted_batches: 0,
             denoise: None,
             resolved: None,
+            denoised_tick: 0,
             restored: false,
         })
     }
@@ -270,12 +279,15 @@ impl Session {
         times.render_ms = ms(t);
 
         let t = Instant::now();
-        let (Resolved { image, paths_per_pixel }, resolve_reused) = self.resolve();
+        let (Resolved { image, paths_per_pixel, tick: image_tick }, resolve_reused) = self.resolve();
         times.resolve_ms = ms(t);
 
         // Denoise, keeping the raw image.
         let t = Instant::now();
         let (denoised, aux) = self.denoise_step(&image)?;
+        if !aux.reused {
+            self.denoised_tick = self.tick;
+        }
         times.denoise_ms = if self.denoise.is_some() { ms(t) } else { 0.0 };
         times.total_ms = ms(start);
 
@@ -303,7 +315,9 @@ impl Session {
             accumulation_id: self.film.accumulation_id,
             spp: self.film.passes,
             image,
+            image_tick,
             denoised,
+            denoised_tick: self.denoised_tick,
             stats,
         };
         self.tick += 1;
@@ -322,7 +336,8 @@ impl Session {
         if let Some(f) = self.technique.preview_filter() {
             image = bilateral_filter(&image, f.sigma_spatial_px, f.sigma_range);
         }
-        let resolved = Resolved { image: Arc::new(image), paths_per_pixel: self.film.mean_paths_per_pixel() };
+        let paths_per_pixel = self.film.mean_paths_per_pixel();
+        let resolved = Resolved { image: Arc::new(image), paths_per_pixel, tick: self.tick };
         self.resolved = Some((version, resolved.clone()));
         (resolved, false)
     }

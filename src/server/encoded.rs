@@ -1,5 +1,7 @@
-//! Encoded frames, made once per (tick, format, image, exposure) and shared by every HTTP client
-//! and WebSocket subscriber that asks for the same one (ARCHITECTURE.md, "Publish").
+//! Encoded frames, made once per (image, format, exposure) and shared by every HTTP client and
+//! WebSocket subscriber that asks for the same one (ARCHITECTURE.md, "Publish"). An image is
+//! named by the tick that made it, so the frames of a view at rest (whose ticks reuse the last
+//! image) share one encoding and one ETag.
 //!
 //! A session keeps the last [`EncodedFrames::CAPACITY`] encodings. Two requests for the same
 //! key at once encode it once: the second waits for the first's result. Each encoding carries
@@ -13,7 +15,9 @@ use std::sync::{Arc, Mutex, OnceLock};
 /// Which encoding of which frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EncodingKey {
-    pub tick: u64,
+    /// The tick that made the image: the frame's `image_tick`, or `denoised_tick` for its
+    /// denoised image.
+    pub image_tick: u64,
     pub accumulation_id: u64,
     pub format: ImageFormat,
     /// The raw image of a denoising session rather than the denoised one.
@@ -27,7 +31,8 @@ impl EncodingKey {
         // A session without a denoised image has one image: raw or not, the bytes are the same.
         let raw = raw && frame.denoised.is_some();
         let exposure = if format == ImageFormat::Exr { 0.0 } else { exposure };
-        EncodingKey { tick: frame.tick, accumulation_id: frame.accumulation_id, format, raw, exposure }
+        let image_tick = if frame.denoised.is_some() && !raw { frame.denoised_tick } else { frame.image_tick };
+        EncodingKey { image_tick, accumulation_id: frame.accumulation_id, format, raw, exposure }
     }
 
     /// A strong ETag: the same key always encodes to the same bytes.
@@ -35,7 +40,7 @@ impl EncodingKey {
         let image = if self.raw { "raw" } else { "shown" };
         format!(
             "\"t{}-a{}-{:?}-{image}-e{:08x}\"",
-            self.tick,
+            self.image_tick,
             self.accumulation_id,
             self.format,
             self.exposure.to_bits()
