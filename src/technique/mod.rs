@@ -5,8 +5,8 @@
 //! A technique is driven by the engine once per tick: `update` sees what the edits changed
 //! (verify, invalidate, retrace), then `render` adds samples to the film. The figures `update`
 //! gathers travel to `render` as a value ([`UpdateStats`]): per-tick figures are not fields of
-//! the state a technique keeps across ticks. Per-tick calls go
-//! through `Box<dyn Technique>`; per-ray variety inside a technique is a closed `enum`.
+//! the state a technique keeps across ticks. Per-tick calls go through `Box<dyn Technique>`;
+//! per-ray variety inside a technique is a closed `enum`.
 //!
 //! Adding a technique: its folder holds the code, its configuration and its registry
 //! `DESCRIPTION` (id, summary, spec shorthands, main parameters, test configurations). Outside
