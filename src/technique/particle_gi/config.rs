@@ -218,6 +218,17 @@ pub struct ParticleStats {
     pub memory: crate::technique::ResidentMemory,
 }
 
+impl ParticleStats {
+    /// Adds a lighting stage's work.
+    pub(super) fn record(&mut self, work: lighting::LightingWork) {
+        self.emission_rays += work.emission_rays;
+        self.particles_lit += work.lit;
+        self.scatter_deposits += work.deposits;
+        self.emission_ms += work.emission_ms;
+        self.scattering_ms += work.scattering_ms;
+    }
+}
+
 /// The registry's description (`technique/registry.rs`).
 pub const DESCRIPTION: TechniqueDescription = TechniqueDescription {
     id: "particle_gi",

@@ -92,7 +92,7 @@ use crate::technique::box_tree::{widened, BoxTree, BOX_SLACK};
 use gather::Estimates;
 use glam::Vec3;
 use grid::ObjectGrids;
-use lighting::{Inputs, Lighting, LightingWork};
+use lighting::{Inputs, Lighting};
 use links::{LinkSet, Moves, Target};
 use particles::{AreaParticles, Layout};
 use radiance::{EstimationLists, RadianceKey, Tessellation};
@@ -330,17 +330,6 @@ impl ParticleGi {
         }
         let scatter = if delta.materials.is_empty() { emit.clone() } else { vec![true; shares] };
         scatter.contains(&true).then_some((emit, scatter))
-    }
-}
-
-impl ParticleStats {
-    /// Adds a lighting stage's work.
-    fn record(&mut self, work: LightingWork) {
-        self.emission_rays += work.emission_rays;
-        self.particles_lit += work.lit;
-        self.scatter_deposits += work.deposits;
-        self.emission_ms += work.emission_ms;
-        self.scattering_ms += work.scattering_ms;
     }
 }
 
