@@ -8,6 +8,7 @@
 //! worker thread (`worker.rs`) inside the shared rayon pool. No lock is held across `.await`.
 //! Errors: every client fault is a 4xx JSON `{error, detail}`; internal faults are 500s with a
 //! log line. When a token is configured, every `/v1` route requires `Authorization: Bearer`.
+mod api_docs;
 mod create;
 pub mod encoded;
 pub mod error;
@@ -208,6 +209,8 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/viewer.css", get(routes::viewer_style))
         .route("/healthz", get(routes::healthz))
         .route("/metrics", get(routes::metrics))
+        .route("/api/{file}", get(api_docs::file))
+        .route("/api/examples/{file}", get(api_docs::example))
         .nest("/v1", v1)
         .fallback(routes::not_found)
         .layer(middleware::from_fn_with_state(state.clone(), check_host))

@@ -398,5 +398,5 @@ pub async fn viewer_style() -> Response {
 }
 
 pub async fn not_found() -> ApiError {
-    ApiError::not_found("no such route (see proto/openapi.yaml)")
+    ApiError::not_found("no such route (see /api/openapi.yaml)")
 }
