@@ -244,23 +244,7 @@ impl Session {
     pub fn tick(&mut self) -> Result<Frame, EngineError> {
         let start = Instant::now();
         let mut times = PhaseTimes::default();
-
-        // Drain the queue and apply it to the model.
-        let batch = std::mem::take(&mut self.pending);
-        let received = std::mem::take(&mut self.pending_received);
-        times.drain_ms = ms(start);
-        let t = Instant::now();
-        let kept = batch.len();
-        let mut delta: SceneDelta = edits::apply(&mut self.scene, batch)?;
-        delta.received = received;
-        delta.coalesced = received - kept;
-        times.apply_ms = ms(t);
-
-        // Commit only moved instances to Embree.
-        let t = Instant::now();
-        let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
-        self.accel.update_instances(&self.scene, &moved)?;
-        times.commit_ms = ms(t);
+        let delta = self.drain_apply_commit(start, &mut times)?;
 
         // Let the technique verify and invalidate; restart accumulation where it says.
         let t = Instant::now();
@@ -322,6 +306,26 @@ impl Session {
         };
         self.tick += 1;
         Ok(frame)
+    }
+
+    /// The tick's first three steps: drains the queue (timed from `start`), applies it to the
+    /// model, and commits only the moved instances to Embree.
+    fn drain_apply_commit(&mut self, start: Instant, times: &mut PhaseTimes) -> Result<SceneDelta, EngineError> {
+        let batch = std::mem::take(&mut self.pending);
+        let received = std::mem::take(&mut self.pending_received);
+        times.drain_ms = ms(start);
+        let t = Instant::now();
+        let kept = batch.len();
+        let mut delta = edits::apply(&mut self.scene, batch)?;
+        delta.received = received;
+        delta.coalesced = received - kept;
+        times.apply_ms = ms(t);
+
+        let t = Instant::now();
+        let moved: Vec<_> = delta.moved.iter().map(|m| m.surface).collect();
+        self.accel.update_instances(&self.scene, &moved)?;
+        times.commit_ms = ms(t);
+        Ok(delta)
     }
 
     /// The film as an image (preview-filtered if the technique asks) and its mean paths per

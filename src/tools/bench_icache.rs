@@ -11,7 +11,7 @@
 //! a fresh computation (it should be 0; it slows the run down). `--plot DIR` draws the indirect
 //! time of every frame and the stage split, per mode.
 use super::plot::{write_both, Lines, StackedBars};
-use super::{progress_bar, quantile, AnimationArgs, UsageError};
+use super::{progress_bar, quantile, AnimationArgs, Frames, UsageError};
 use crate::technique::instant_cache::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation};
 use crate::technique::{TechniqueConfig, TechniqueStats};
 use anyhow::Result;
@@ -120,12 +120,34 @@ pub struct StageSplit {
     pub records: f64,
 }
 
-#[derive(Debug, Serialize)]
-pub struct ModeReport {
-    pub mode: String,
-    pub initial: FrameFigures,
-    pub frames: Vec<FrameFigures>,
-    pub summary: Summary,
+pub type ModeReport = super::ModeReport<FrameFigures, Summary>;
+
+/// The medians (and p95s) of a mode's frames after the first.
+fn summarize(frames: &Frames<FrameFigures>) -> Summary {
+    let median = |figure: fn(&FrameFigures) -> f64| frames.quantile(figure, 0.5);
+    let resting: Vec<f64> = frames.0.iter().filter(|f| f.stats.idle).map(|f| f.indirect_ms).collect();
+    Summary {
+        tick_ms_median: median(|f| f.tick_ms),
+        tick_ms_p95: frames.quantile(|f| f.tick_ms, 0.95),
+        indirect_ms_median: median(|f| f.indirect_ms),
+        indirect_ms_p95: frames.quantile(|f| f.indirect_ms, 0.95),
+        stage_ms_median: StageSplit {
+            camera: median(|f| f.stats.camera_ms),
+            vpls: median(|f| f.stats.vpl_ms),
+            invalidate: median(|f| f.stats.invalidate_ms),
+            pixels: median(|f| f.stats.indirect_ms),
+            records: median(|f| f.stats.records_ms),
+        },
+        rays_median: median(|f| f.rays as f64),
+        visibility_rays_median: median(|f| f.visibility_rays as f64),
+        records_median: median(|f| f.records as f64),
+        records_created_median: median(|f| f.records_created as f64),
+        memory_bytes: frames.0.last().map_or(0, |f| f.stats.memory.total_bytes),
+        resting_frames: resting.len(),
+        resting_indirect_ms_median: quantile(&resting, 0.5),
+        audit_mismatched: frames.0.iter().map(|f| f.stats.audit_mismatched).sum(),
+        audit_off_surface: frames.0.iter().map(|f| f.stats.audit_off_surface).sum(),
+    }
 }
 
 #[derive(Debug, Serialize)]
@@ -187,34 +209,7 @@ pub fn measure(args: &IcacheArgs) -> Result<IcacheReport> {
             bar.inc(1);
             Ok(())
         })?;
-        let initial = figures.remove(0);
-        let col = |f: &dyn Fn(&FrameFigures) -> f64| figures.iter().map(f).collect::<Vec<f64>>();
-        let (ticks, indirect) = (col(&|f| f.tick_ms), col(&|f| f.indirect_ms));
-        let last = figures.last().map(|f| &f.stats);
-        let resting: Vec<f64> = figures.iter().filter(|f| f.stats.idle).map(|f| f.indirect_ms).collect();
-        let summary = Summary {
-            tick_ms_median: quantile(&ticks, 0.5),
-            tick_ms_p95: quantile(&ticks, 0.95),
-            indirect_ms_median: quantile(&indirect, 0.5),
-            indirect_ms_p95: quantile(&indirect, 0.95),
-            stage_ms_median: StageSplit {
-                camera: quantile(&col(&|f| f.stats.camera_ms), 0.5),
-                vpls: quantile(&col(&|f| f.stats.vpl_ms), 0.5),
-                invalidate: quantile(&col(&|f| f.stats.invalidate_ms), 0.5),
-                pixels: quantile(&col(&|f| f.stats.indirect_ms), 0.5),
-                records: quantile(&col(&|f| f.stats.records_ms), 0.5),
-            },
-            rays_median: quantile(&col(&|f| f.rays as f64), 0.5),
-            visibility_rays_median: quantile(&col(&|f| f.visibility_rays as f64), 0.5),
-            records_median: quantile(&col(&|f| f.records as f64), 0.5),
-            records_created_median: quantile(&col(&|f| f.records_created as f64), 0.5),
-            memory_bytes: last.map_or(0, |s| s.memory.total_bytes),
-            resting_frames: resting.len(),
-            resting_indirect_ms_median: quantile(&resting, 0.5),
-            audit_mismatched: figures.iter().map(|f| f.stats.audit_mismatched).sum(),
-            audit_off_surface: figures.iter().map(|f| f.stats.audit_off_surface).sum(),
-        };
-        reports.push(ModeReport { mode: label.to_string(), initial, frames: figures, summary });
+        reports.push(ModeReport::new(label.to_string(), figures, summarize)?);
     }
     bar.finish_and_clear();
     Ok(IcacheReport {

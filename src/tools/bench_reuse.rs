@@ -8,7 +8,7 @@
 //! `verify` time is origin updates with DM_C, the bounce-row screen, dynamic occlusions and
 //! pruning; `trace` is fills and retraces. `screened` counts the paths the screen passed on to
 //! the per-path checks.
-use super::{progress_bar, quantile, AnimationArgs};
+use super::{progress_bar, AnimationArgs, Frames};
 use crate::technique::photon_reuse::{PhotonReuseConfig, ReuseMode};
 use crate::technique::{TechniqueConfig, TechniqueStats};
 use anyhow::Result;
@@ -51,13 +51,7 @@ pub struct Summary {
     pub memory_bytes: u64,
 }
 
-#[derive(Debug, Serialize)]
-pub struct ModeReport {
-    pub mode: String,
-    pub initial: FrameFigures,
-    pub frames: Vec<FrameFigures>,
-    pub summary: Summary,
-}
+pub type ModeReport = super::ModeReport<FrameFigures, Summary>;
 
 #[derive(Debug, Serialize)]
 pub struct ReuseReport {
@@ -150,26 +144,22 @@ fn measure_size(
             bar.inc(1);
             Ok(())
         })?;
-        let initial = figures.remove(0);
-        let col = |f: &dyn Fn(&FrameFigures) -> f64| figures.iter().map(f).collect::<Vec<f64>>();
-        let rays = col(&|f| f.rays_traced as f64);
-        let ticks = col(&|f| f.tick_ms);
-        let summary = Summary {
-            rays_per_tick_median: quantile(&rays, 0.5),
-            rays_per_tick_p95: quantile(&rays, 0.95),
-            tick_ms_median: quantile(&ticks, 0.5),
-            tick_ms_p95: quantile(&ticks, 0.95),
-            verify_ms_median: quantile(&col(&verify_ms), 0.5),
-            trace_plus_verify_ms_median: quantile(
-                &col(&|f| verify_ms(f) + f.stages_ms["fill"] + f.stages_ms["trace"]),
-                0.5,
-            ),
-            grid_ms_median: quantile(&col(&|f| f.stages_ms["grid"]), 0.5),
-            render_ms_median: quantile(&col(&|f| f.stages_ms["render"]), 0.5),
-            grid_photons_changed_median: quantile(&col(&|f| f.grid_photons_changed as f64), 0.5),
-            memory_bytes: memory,
+        let summary = |frames: &Frames<FrameFigures>| {
+            let median = |figure: fn(&FrameFigures) -> f64| frames.quantile(figure, 0.5);
+            Summary {
+                rays_per_tick_median: median(|f| f.rays_traced as f64),
+                rays_per_tick_p95: frames.quantile(|f| f.rays_traced as f64, 0.95),
+                tick_ms_median: median(|f| f.tick_ms),
+                tick_ms_p95: frames.quantile(|f| f.tick_ms, 0.95),
+                verify_ms_median: median(verify_ms),
+                trace_plus_verify_ms_median: median(|f| verify_ms(f) + f.stages_ms["fill"] + f.stages_ms["trace"]),
+                grid_ms_median: median(|f| f.stages_ms["grid"]),
+                render_ms_median: median(|f| f.stages_ms["render"]),
+                grid_photons_changed_median: median(|f| f.grid_photons_changed as f64),
+                memory_bytes: memory,
+            }
         };
-        reports.push(ModeReport { mode: name, initial, frames: figures, summary });
+        reports.push(ModeReport::new(name, figures, summary)?);
     }
     Ok(reports)
 }

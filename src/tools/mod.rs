@@ -300,3 +300,38 @@ impl AnimationRun {
         })
     }
 }
+
+/// One mode of an animation benchmark: its first frame (which builds everything) apart, the
+/// other frames, and their summary.
+#[derive(Debug, serde::Serialize)]
+pub struct ModeReport<F, S> {
+    pub mode: String,
+    pub initial: F,
+    pub frames: Vec<F>,
+    pub summary: S,
+}
+
+impl<F, S> ModeReport<F, S> {
+    /// Splits off the first of `frames` (at least one) and summarises the rest.
+    pub fn new(mode: String, mut frames: Vec<F>, summarize: impl FnOnce(&Frames<F>) -> S) -> anyhow::Result<Self> {
+        anyhow::ensure!(!frames.is_empty(), "{mode}: no frame was played");
+        let initial = frames.remove(0);
+        let summary = summarize(&Frames(&frames));
+        Ok(ModeReport { mode, initial, frames, summary })
+    }
+}
+
+/// A benchmark's frames after the first, as its summary reads them.
+pub struct Frames<'a, F>(pub &'a [F]);
+
+impl<F> Frames<'_, F> {
+    /// One figure of every frame.
+    pub fn column(&self, figure: impl Fn(&F) -> f64) -> Vec<f64> {
+        self.0.iter().map(figure).collect()
+    }
+
+    /// The `q` quantile of one figure over the frames.
+    pub fn quantile(&self, figure: impl Fn(&F) -> f64, q: f64) -> f64 {
+        quantile(&self.column(figure), q)
+    }
+}
