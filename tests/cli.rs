@@ -251,10 +251,23 @@ fn bench_bunnies(bench: &str, args: &[&str]) -> serde_json::Value {
 
 #[test]
 fn bench_reuse_reports_each_mode_with_the_named_fields() {
-    let v = bench_bunnies(
-        "reuse",
-        &["--frames", "4", "--paths", "4000", "--width", "16", "--height", "16", "--threads", "1"],
-    );
+    // `--plot` creates its directory and draws both plots, as PNG and SVG, with a legend entry
+    // for each mode and, in the stage plot, each stage. Negative control, by hand: plotting
+    // only the first mode leaves `naive` out of the SVGs.
+    let plots = out_dir("reuse-plots").join("new/dir");
+    let args = ["--frames", "4", "--paths", "4000", "--width", "16", "--height", "16", "--threads", "1", "--plot"];
+    let v = bench_bunnies("reuse", &[&args[..], &[plots.to_str().unwrap()]].concat());
+    for (stem, labels) in
+        [("reuse_tick_by_frame", &["off", "naive", "error"][..]), ("reuse_stages", &["naive", "trace", "render"])]
+    {
+        let png = image::open(plots.join(format!("{stem}.png"))).unwrap_or_else(|e| panic!("{stem}.png: {e}"));
+        assert!(png.width() >= 640 && png.height() >= 400, "{stem}.png is {}x{}", png.width(), png.height());
+        let svg = std::fs::read_to_string(plots.join(format!("{stem}.svg"))).unwrap();
+        for label in labels {
+            // plotters writes each text element's string on a line of its own.
+            assert!(svg.contains(&format!("\n{label}\n")), "{stem}.svg lacks {label}");
+        }
+    }
     let modes = v["modes"].as_array().unwrap();
     assert_eq!(modes.iter().map(|m| m["mode"].as_str().unwrap()).collect::<Vec<_>>(), ["off", "naive", "error"]);
     for m in modes {

@@ -11,7 +11,7 @@
 //! a fresh computation (it should be 0; it slows the run down). `--plot DIR` draws the indirect
 //! time of every frame and the stage split, per mode.
 use super::plot::{write_both, Lines, StackedBars};
-use super::{progress_bar, quantile, AnimationArgs, Frames, UsageError};
+use super::{progress_bar, quantile, AnimationArgs, Frames};
 use crate::technique::instant_cache::{CacheMode, InstantCacheConfig, InstantCacheStats, Reevaluation};
 use crate::technique::{TechniqueConfig, TechniqueStats};
 use anyhow::Result;
@@ -310,10 +310,7 @@ fn plot(dir: &std::path::Path, r: &IcacheReport) -> Result<()> {
 }
 
 pub fn run(args: IcacheArgs) -> Result<()> {
-    // A directory that cannot be made fails now, not after the run.
-    if let Some(dir) = &args.plot {
-        std::fs::create_dir_all(dir).map_err(|e| UsageError(format!("--plot {}: {e}", dir.display())))?;
-    }
+    super::plot::make_dir(args.plot.as_deref())?;
     let report = measure(&args)?;
     print_table(&report, args.audit);
     super::write_json_report(args.run.json.as_deref(), &report)?;

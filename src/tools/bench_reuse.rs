@@ -7,7 +7,9 @@
 //! filled segments); camera and shadow rays are the same in every mode and left out.
 //! `verify` time is origin updates with DM_C, the bounce-row screen, dynamic occlusions and
 //! pruning; `trace` is fills and retraces. `screened` counts the paths the screen passed on to
-//! the per-path checks.
+//! the per-path checks. `--plot DIR` draws each mode's tick per frame and its median tick by
+//! stage.
+use super::plot::{write_both, Lines, StackedBars};
 use super::{progress_bar, AnimationArgs, Frames};
 use crate::technique::photon_reuse::{PhotonReuseConfig, ReuseMode};
 use crate::technique::{TechniqueConfig, TechniqueStats};
@@ -23,7 +25,16 @@ pub struct ReuseArgs {
     /// tick grows with the number of paths.
     #[arg(long, value_delimiter = ',', default_value = "1000000")]
     pub paths: Vec<u32>,
+    /// Also draw the run (the modes at the first `--paths`) into DIR (created if missing), as
+    /// PNG and SVG: `reuse_tick_by_frame` (each mode's tick milliseconds per frame, frame 0
+    /// building everything) and `reuse_stages` (each mode's median tick by stage).
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<std::path::PathBuf>,
 }
+
+/// A tick's stages as `stages_ms` names them, in the order they run.
+const STAGES: [&str; 9] =
+    ["apply_and_commit", "origins_and_dm", "screen", "verify", "prune", "fill", "trace", "grid", "render"];
 
 #[derive(Debug, Serialize)]
 pub struct FrameFigures {
@@ -121,17 +132,18 @@ fn measure_size(
             };
             memory = s.memory.total_bytes;
             let t = &frame.stats.times;
-            let stages = BTreeMap::from([
-                ("apply_and_commit", t.apply_ms + t.commit_ms),
-                ("origins_and_dm", s.origins_ms),
-                ("screen", s.screen_ms),
-                ("verify", s.verify_ms - s.screen_ms),
-                ("prune", s.prune_ms),
-                ("fill", s.fill_ms),
-                ("trace", s.trace_ms),
-                ("grid", s.grid_ms),
-                ("render", s.render_ms),
-            ]);
+            let stages = [
+                t.apply_ms + t.commit_ms,
+                s.origins_ms,
+                s.screen_ms,
+                s.verify_ms - s.screen_ms,
+                s.prune_ms,
+                s.fill_ms,
+                s.trace_ms,
+                s.grid_ms,
+                s.render_ms,
+            ];
+            let stages = STAGES.into_iter().zip(stages).collect();
             figures.push(FrameFigures {
                 rays_traced: s.photon_rays(),
                 paths_retraced: s.partly_retraced + s.fully_retraced,
@@ -215,8 +227,42 @@ pub fn print_table(r: &ReuseReport) {
     }
 }
 
+/// Writes `--plot`'s two plots into `dir`, which exists.
+fn plot(dir: &std::path::Path, r: &ReuseReport) -> Result<()> {
+    let series = r
+        .modes
+        .iter()
+        .map(|m| {
+            let frames = std::iter::once(&m.initial).chain(&m.frames);
+            (m.mode.clone(), frames.enumerate().map(|(i, f)| (i as f64, f.tick_ms)).collect())
+        })
+        .collect();
+    let caption = format!("Whole tick per frame ({}x{}, {} photon paths)", r.width, r.height, r.paths);
+    write_both(dir, "reuse_tick_by_frame", &Lines { caption, unit: "ms".into(), series })?;
+    let bars = r
+        .modes
+        .iter()
+        .map(|m| {
+            let frames = Frames(&m.frames);
+            (m.mode.clone(), STAGES.iter().map(|&st| frames.quantile(|f| f.stages_ms[st], 0.5)).collect())
+        })
+        .collect();
+    let caption = "Median tick by stage (frames 1 on)".to_string();
+    write_both(
+        dir,
+        "reuse_stages",
+        &StackedBars { caption, stages: STAGES.map(|s| s.replace('_', " ")).to_vec(), bars },
+    )
+}
+
 pub fn run(args: ReuseArgs) -> Result<()> {
+    super::plot::make_dir(args.plot.as_deref())?;
     let report = measure(&args)?;
     print_table(&report);
-    super::write_json_report(args.run.json.as_deref(), &report)
+    super::write_json_report(args.run.json.as_deref(), &report)?;
+    if let Some(dir) = &args.plot {
+        plot(dir, &report)?;
+        println!("  wrote the plots to {}", dir.display());
+    }
+    Ok(())
 }

@@ -1,6 +1,7 @@
 //! The plots the benchmarks write, each as PNG and SVG (plotters): a value per frame as one line
 //! per configuration ([`Lines`]), and a median time per stage as one stacked bar per
-//! configuration ([`StackedBars`]). `bench error` and `bench icache` draw their data with them.
+//! configuration ([`StackedBars`]). `bench error`, `bench icache` and `bench reuse` draw their
+//! data with them.
 use anyhow::{anyhow, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -66,6 +67,17 @@ pub fn err<E: std::fmt::Display>(e: E) -> anyhow::Error {
 /// A plot that can be drawn on any plotters backend.
 pub trait Plot {
     fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> Result<()>;
+}
+
+/// Makes `--plot`'s directory (if asked for one) before a run, so a directory that cannot be
+/// made fails at once, as a usage error naming the flag, not after the run.
+pub fn make_dir(dir: Option<&Path>) -> Result<(), super::UsageError> {
+    match dir {
+        Some(dir) => {
+            std::fs::create_dir_all(dir).map_err(|e| super::UsageError(format!("--plot {}: {e}", dir.display())))
+        }
+        None => Ok(()),
+    }
 }
 
 /// Draws `plot` into `<stem>.png` and `<stem>.svg` under `dir`.
