@@ -24,6 +24,7 @@ fn merry_go_round(s: &TestServer) -> LoadArgs {
         frames: "png".into(),
         token: None,
         json: None,
+        plot: None,
     }
 }
 
@@ -37,6 +38,16 @@ async fn two_sessions_for_five_seconds_lose_nothing() {
     assert!(r.edits_sent > 0 && r.edits_applied > 0);
     assert!(r.frames_received > 2, "{} frames", r.frames_received);
     assert!(r.latency_p50_ms > 0.0 && r.latency_p50_ms <= r.latency_p99_ms);
+    // The seconds of the run: in order, inside it, each p50 ≤ p95 ≤ max, and together they hold
+    // the run's slowest tick (no latency is left out of them). Negative control, by hand:
+    // counting `second` in milliseconds fails the bound on it.
+    let w = &r.latency_by_second;
+    assert!(!w.is_empty(), "no second of the run measured a tick");
+    assert!(w.windows(2).all(|p| p[0].second < p[1].second), "{w:?}");
+    assert!(w.iter().all(|x| x.second as f64 <= r.duration_s), "{w:?} past {} s", r.duration_s);
+    assert!(w.iter().all(|x| x.ticks > 0 && x.p50_ms <= x.p95_ms && x.p95_ms <= x.max_ms), "{w:?}");
+    let slowest = w.iter().map(|x| x.max_ms).fold(0.0, f64::max);
+    assert!(slowest >= r.latency_p99_ms, "slowest {slowest} ms < p99 {} ms", r.latency_p99_ms);
     // The sessions were cleaned up afterwards.
     assert_eq!(s.state.session_count(), 0);
     s.shutdown().await.unwrap();

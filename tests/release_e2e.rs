@@ -4,8 +4,9 @@
 //! the release binary, built with the profile users get. This starts `relume serve` on a free
 //! loopback port and, for every technique, creates a session, ticks it over HTTP and over a
 //! WebSocket, and fetches a PNG and an EXR; it runs `relume render` at packet widths 1, 8 and
-//! 16 under every Embree kernel family this CPU has; and it stops the server with SIGTERM,
-//! which must exit 0. A crash anywhere (a signal instead of an exit code) fails the test.
+//! 16 under every Embree kernel family this CPU has; it streams an animation at the server with
+//! `relume load`, as a load test does; and it stops the server with SIGTERM, which must exit 0.
+//! A crash anywhere (a signal instead of an exit code) fails the test.
 mod common;
 use common::process::Served;
 use common::ws::{next_frame, next_text, send};
@@ -66,6 +67,41 @@ fn the_release_binary_serves_every_technique_and_stops_on_sigterm() {
             drive_session(&http, &served, serde_json::to_value(&config).expect("config JSON")).await;
         }
     });
+    let status = served.terminate();
+    assert_eq!(status.code(), Some(0), "relume serve ended with {status:?} after SIGTERM");
+}
+
+#[test]
+fn the_release_load_client_streams_an_animation_and_plots_its_latency() {
+    // `relume load` against `relume serve`, both the release binary: the run exits 0 (no
+    // errors, no lost edits), its JSON report has the run's seconds, and `--plot` draws them
+    // with a line for each of p50, p95 and max.
+    let served = Served::start(&[]);
+    let dir = std::env::temp_dir().join(format!("relume-e2e-load-{}", std::process::id()));
+    let (json, plots) = (dir.join("load.json"), dir.join("plots"));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let anim = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/merry-go-round.anim.json");
+    let out = Command::new(BIN)
+        .args(["load", "--url", &served.url(""), "--scene", "merry-go-round", "--anim"])
+        .arg(&anim)
+        .args(["--sessions", "2", "--duration", "3s", "--warmup", "1s", "--width", "32", "--height", "32"])
+        .arg("--json")
+        .arg(&json)
+        .arg("--plot")
+        .arg(&plots)
+        .output()
+        .expect("relume load");
+    assert!(out.status.success(), "relume load: {}", String::from_utf8_lossy(&out.stderr));
+    let report: Value = serde_json::from_str(&std::fs::read_to_string(&json).expect("report")).expect("JSON");
+    let seconds = report["latency_by_second"].as_array().expect("latency_by_second");
+    assert!(!seconds.is_empty() && seconds.iter().all(|w| w["ticks"].as_u64() > Some(0)), "{seconds:?}");
+    image::open(plots.join("load_latency.png")).expect("load_latency.png");
+    let svg = std::fs::read_to_string(plots.join("load_latency.svg")).expect("load_latency.svg");
+    for line in ["p50", "p95", "max"] {
+        // plotters writes each text element's string on a line of its own.
+        assert!(svg.contains(&format!("\n{line}\n")), "load_latency.svg has no {line} line");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
     let status = served.terminate();
     assert_eq!(status.code(), Some(0), "relume serve ended with {status:?} after SIGTERM");
 }

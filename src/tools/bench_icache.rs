@@ -295,7 +295,7 @@ fn plot(dir: &std::path::Path, r: &IcacheReport) -> Result<()> {
         })
         .collect();
     let caption = format!("Indirect light per frame ({}x{}, {} VPLs)", r.width, r.height, r.vpls);
-    write_both(dir, "icache_indirect_by_frame", &Lines { caption, unit: "ms".into(), series })?;
+    write_both(dir, "icache_indirect_by_frame", &Lines { caption, x: "frame", unit: "ms".into(), series })?;
     let stages = ["camera and direct light", "shoot VPLs", "invalidate", "pixels less records", "records"];
     let bars = r
         .modes

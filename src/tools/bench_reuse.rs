@@ -238,7 +238,7 @@ fn plot(dir: &std::path::Path, r: &ReuseReport) -> Result<()> {
         })
         .collect();
     let caption = format!("Whole tick per frame ({}x{}, {} photon paths)", r.width, r.height, r.paths);
-    write_both(dir, "reuse_tick_by_frame", &Lines { caption, unit: "ms".into(), series })?;
+    write_both(dir, "reuse_tick_by_frame", &Lines { caption, x: "frame", unit: "ms".into(), series })?;
     let bars = r
         .modes
         .iter()

@@ -1,7 +1,7 @@
-//! The plots the benchmarks write, each as PNG and SVG (plotters): a value per frame as one line
-//! per configuration ([`Lines`]), and a median time per stage as one stacked bar per
-//! configuration ([`StackedBars`]). `bench error`, `bench icache` and `bench reuse` draw their
-//! data with them.
+//! The plots the benchmarks and the load client write, each as PNG and SVG (plotters): a value
+//! per frame (or second) as one line per configuration ([`Lines`]), and a median time per stage
+//! as one stacked bar per configuration ([`StackedBars`]). `bench error`, `bench icache`, `bench
+//! reuse` and `load` draw their data with them.
 use anyhow::{anyhow, Result};
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -104,9 +104,11 @@ pub fn legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(chart: &mut Chart
         .map_err(err)
 }
 
-/// A positive value per frame, one line per configuration, on a log scale.
+/// A positive value per frame (or second), one line per configuration, on a log scale.
 pub struct Lines {
     pub caption: String,
+    /// What the points' x values count, whole numbers (`frame`), for the x axis.
+    pub x: &'static str,
     /// What the values are, for the y axis.
     pub unit: String,
     /// Per configuration: its label and its (frame, value) points; values ≤ 0 are left out.
@@ -134,11 +136,11 @@ impl Plot for Lines {
                 )),
             )
             .map_err(err)?;
-        // Frames are whole numbers: a label between two frames is left blank.
+        // Frames and seconds are whole numbers: a label between two is left blank.
         let whole = |v: &f64| if v.fract() == 0.0 { format!("{v:.0}") } else { String::new() };
         chart
             .configure_mesh()
-            .x_desc("frame")
+            .x_desc(self.x)
             .x_label_formatter(&whole)
             .y_desc(format!("{} (log)", self.unit))
             .y_label_formatter(&|v| readable(*v))

@@ -36,7 +36,7 @@ fn per_frame(r: &ErrorReport, caption: &str, unit: &str, value: fn(&FrameResult)
             (s.config.clone(), frames.filter_map(|f| Some((f.frame as f64, value(f)?))).collect())
         })
         .collect();
-    Lines { caption: caption.into(), unit: unit.into(), series }
+    Lines { caption: caption.into(), x: "frame", unit: unit.into(), series }
 }
 
 /// Median milliseconds per tick stage, per configuration.

@@ -17,6 +17,10 @@
 //!   `seq`). A slow tick then delays every period behind it and is counted as such, instead of
 //!   slowing the client down and hiding itself (coordinated omission).
 //!
+//! The report gives each second of the run's latencies (`latency_by_second`: the ticks that
+//! completed in it, p50, p95 and max), and `--plot DIR` draws them (`load_latency`), so a stall
+//! or a slow drift shows where it happened.
+//!
 //! Every wait has a bound (`--timeout`): connecting, each HTTP request, each WebSocket send,
 //! each tick (or each period's edits, open loop) awaiting its frame, and the final drain. An
 //! `error` message from the server ends the tick it answers, so a failing session cannot wedge
@@ -81,13 +85,35 @@ pub struct LoadArgs {
     /// Also write the report as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also draw the latency of each second of the run (p50, p95 and max) into DIR (created if
+    /// missing), as `load_latency.png` and `.svg`.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
+}
+
+/// One tick's latency, and when it was measured.
+#[derive(Debug, Clone, Copy)]
+pub struct Latency {
+    pub at: Instant,
+    pub ms: f64,
+}
+
+/// The latencies of the ticks measured in one second of the run.
+#[derive(Debug, Clone, Serialize)]
+pub struct LatencyWindow {
+    /// Whole seconds from the start of the streams.
+    pub second: u64,
+    pub ticks: u64,
+    pub p50_ms: f64,
+    pub p95_ms: f64,
+    pub max_ms: f64,
 }
 
 /// What one session saw.
-#[derive(Debug, Default, Clone, Serialize)]
+#[derive(Debug, Default, Clone)]
 pub struct SessionReport {
     pub ticks: u64,
-    pub latencies_ms: Vec<f64>,
+    pub latencies: Vec<Latency>,
     pub frames_received: u64,
     pub frames_dropped: u64,
     pub edits_sent: u64,
@@ -140,6 +166,8 @@ pub struct LoadReport {
     pub rss_growth_after_warmup: f64,
     /// Server time spent encoding frames ÷ time spent ticking, during the run.
     pub encode_to_tick_ratio: f64,
+    /// Each second of the run in which some tick's latency was measured, in order.
+    pub latency_by_second: Vec<LatencyWindow>,
 }
 
 /// The `p`th percentile of sorted values (nearest rank).
@@ -239,7 +267,7 @@ pub async fn run_load(args: &LoadArgs) -> Result<LoadReport> {
     let end = server_figures(&http, &base).await;
     let rss_warm = warm.await.unwrap_or(0);
     delete_sessions(&http, &base, &ids).await;
-    Ok(summarise(args, &reports, elapsed, (start, end), rss_warm))
+    Ok(summarise(args, &reports, (started, elapsed), (start, end), rss_warm))
 }
 
 /// Creates `args.sessions` sessions; if one fails, deletes those made so far (they would
@@ -276,11 +304,11 @@ async fn create_sessions(
 fn summarise(
     args: &LoadArgs,
     reports: &[SessionReport],
-    elapsed: f64,
+    (started, elapsed): (Instant, f64),
     (start, end): (ServerFigures, ServerFigures),
     rss_warm: u64,
 ) -> LoadReport {
-    let mut lat: Vec<f64> = reports.iter().flat_map(|r| r.latencies_ms.iter().copied()).collect();
+    let mut lat: Vec<f64> = reports.iter().flat_map(|r| r.latencies.iter().map(|l| l.ms)).collect();
     lat.sort_by(f64::total_cmp);
     let sum = |f: fn(&SessionReport) -> u64| reports.iter().map(f).sum::<u64>();
     let (sent, received) = (sum(|r| r.edits_sent), sum(|r| r.edits_received_by_server));
@@ -314,7 +342,41 @@ fn summarise(
         } else {
             0.0
         },
+        latency_by_second: by_second(reports, started),
     }
+}
+
+/// The sessions' latencies by the second of the run (from `started`) they were measured in.
+fn by_second(reports: &[SessionReport], started: Instant) -> Vec<LatencyWindow> {
+    let mut seconds: std::collections::BTreeMap<u64, Vec<f64>> = Default::default();
+    for l in reports.iter().flat_map(|r| &r.latencies) {
+        seconds.entry(l.at.saturating_duration_since(started).as_secs()).or_default().push(l.ms);
+    }
+    seconds
+        .into_iter()
+        .map(|(second, mut ms)| {
+            ms.sort_by(f64::total_cmp);
+            let max_ms = ms.last().copied().unwrap_or(0.0);
+            let (p50_ms, p95_ms) = (percentile(&ms, 50.0), percentile(&ms, 95.0));
+            LatencyWindow { second, ticks: ms.len() as u64, p50_ms, p95_ms, max_ms }
+        })
+        .collect()
+}
+
+/// Draws `load_latency` into `dir`, which exists.
+fn plot(dir: &std::path::Path, r: &LoadReport) -> Result<()> {
+    let line = |value: fn(&LatencyWindow) -> f64| -> Vec<(f64, f64)> {
+        r.latency_by_second.iter().map(|w| (w.second as f64, value(w))).collect()
+    };
+    let series = vec![
+        ("p50".to_string(), line(|w| w.p50_ms)),
+        ("p95".to_string(), line(|w| w.p95_ms)),
+        ("max".to_string(), line(|w| w.max_ms)),
+    ];
+    let pace = if r.open_loop { "open loop" } else { "closed loop" };
+    let caption = format!("Tick latency, {} sessions of {} at {} Hz ({pace})", r.sessions, r.scene, r.hz);
+    let lines = super::plot::Lines { caption, x: "second of the run", unit: "ms".into(), series };
+    super::plot::write_both(dir, "load_latency", &lines)
 }
 
 pub fn print_table(r: &LoadReport) {
@@ -358,10 +420,15 @@ pub fn print_table(r: &LoadReport) {
 }
 
 pub fn run(args: LoadArgs) -> Result<()> {
+    super::plot::make_dir(args.plot.as_deref())?;
     let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
     let report = runtime.block_on(run_load(&args))?;
     print_table(&report);
     super::write_json_report(args.json.as_deref(), &report)?;
+    if let Some(dir) = &args.plot {
+        plot(dir, &report)?;
+        println!("  wrote the plot to {}", dir.display());
+    }
     if report.errors > 0 || report.lost_edits != 0 {
         return Err(anyhow::anyhow!("{} errors, {} edits lost", report.errors, report.lost_edits));
     }

@@ -2,7 +2,7 @@
 //! ticks at the pace asked for ([`Pace`]: closed or open loop, with a timeout on every wait),
 //! and a [`Ledger`] of what it sent and is waiting for, from which the session's report is
 //! made. The ledger has no socket, so its bookkeeping is tested on its own.
-use super::SessionReport;
+use super::{Latency, SessionReport};
 use crate::scene::animation::Animation;
 use crate::server::protocol::{ClientMessage, FrameFormat, FrameHeader, ServerMessage};
 use futures_util::{SinkExt, StreamExt};
@@ -230,11 +230,11 @@ impl Ledger {
     /// A tick's frame (or stats, without frames) arrived, having applied batches up to `applied`.
     fn frame_done(&mut self, applied: u64) {
         if let Some(sent) = self.in_flight.take() {
-            self.report.latencies_ms.push(sent.elapsed().as_secs_f64() * 1e3);
+            self.report.latencies.push(Latency { at: Instant::now(), ms: sent.elapsed().as_secs_f64() * 1e3 });
         }
         while self.unapplied.front().is_some_and(|&(seq, _)| seq <= applied) {
             if let Some((_, at)) = self.unapplied.pop_front() {
-                self.report.latencies_ms.push(at.elapsed().as_secs_f64() * 1e3);
+                self.report.latencies.push(Latency { at: Instant::now(), ms: at.elapsed().as_secs_f64() * 1e3 });
             }
         }
     }
@@ -310,12 +310,12 @@ mod tests {
         ledger.receive(text(&ServerMessage::EditsAccepted { queued: 1, pending: 1, seq: 2 }));
         // A tick that applied only seq 1 answers the first period alone.
         ledger.receive(stats(1));
-        assert_eq!(ledger.report.latencies_ms.len(), 1);
-        assert!(ledger.report.latencies_ms[0] >= 900.0, "{:?}", ledger.report.latencies_ms);
+        assert_eq!(ledger.report.latencies.len(), 1);
+        assert!(ledger.report.latencies[0].ms >= 900.0, "{:?}", ledger.report.latencies);
         assert!(ledger.waiting());
         ledger.receive(stats(2));
-        assert_eq!(ledger.report.latencies_ms.len(), 2);
-        assert!((400.0..900.0).contains(&ledger.report.latencies_ms[1]), "{:?}", ledger.report.latencies_ms);
+        assert_eq!(ledger.report.latencies.len(), 2);
+        assert!((400.0..900.0).contains(&ledger.report.latencies[1].ms), "{:?}", ledger.report.latencies);
         assert!(!ledger.waiting());
     }
 
@@ -327,7 +327,7 @@ mod tests {
         let header = FrameHeader { tick: 0, accumulation_id: 0, format: FrameFormat::Png, width: 1, height: 1 };
         ledger.receive(Message::Binary(header.encode().to_vec().into()));
         assert!(!ledger.waiting());
-        assert_eq!((ledger.report.frames_received, ledger.report.latencies_ms.len()), (1, 1));
+        assert_eq!((ledger.report.frames_received, ledger.report.latencies.len()), (1, 1));
     }
 
     #[test]
