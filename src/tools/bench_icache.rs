@@ -286,14 +286,7 @@ pub fn print_table(r: &IcacheReport, audit: bool) {
 
 /// Writes `--plot`'s two plots into `dir`, which exists.
 fn plot(dir: &std::path::Path, r: &IcacheReport) -> Result<()> {
-    let series = r
-        .modes
-        .iter()
-        .map(|m| {
-            let frames = std::iter::once(&m.initial).chain(&m.frames);
-            (m.mode.clone(), frames.enumerate().map(|(i, f)| (i as f64, f.indirect_ms)).collect())
-        })
-        .collect();
+    let series = r.modes.iter().map(|m| m.per_frame(|f| f.indirect_ms)).collect();
     let caption = format!("Indirect light per frame ({}x{}, {} VPLs)", r.width, r.height, r.vpls);
     write_both(dir, "icache_indirect_by_frame", &Lines { caption, x: "frame", unit: "ms".into(), series })?;
     let stages = ["camera and direct light", "shoot VPLs", "invalidate", "pixels less records", "records"];

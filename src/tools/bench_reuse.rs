@@ -229,14 +229,7 @@ pub fn print_table(r: &ReuseReport) {
 
 /// Writes `--plot`'s two plots into `dir`, which exists.
 fn plot(dir: &std::path::Path, r: &ReuseReport) -> Result<()> {
-    let series = r
-        .modes
-        .iter()
-        .map(|m| {
-            let frames = std::iter::once(&m.initial).chain(&m.frames);
-            (m.mode.clone(), frames.enumerate().map(|(i, f)| (i as f64, f.tick_ms)).collect())
-        })
-        .collect();
+    let series = r.modes.iter().map(|m| m.per_frame(|f| f.tick_ms)).collect();
     let caption = format!("Whole tick per frame ({}x{}, {} photon paths)", r.width, r.height, r.paths);
     write_both(dir, "reuse_tick_by_frame", &Lines { caption, x: "frame", unit: "ms".into(), series })?;
     let bars = r

@@ -319,6 +319,13 @@ impl<F, S> ModeReport<F, S> {
         let summary = summarize(&Frames(&frames));
         Ok(ModeReport { mode, initial, frames, summary })
     }
+
+    /// The mode's label and one figure of every frame, the first included, as (frame, value)
+    /// points to plot.
+    pub fn per_frame(&self, figure: impl Fn(&F) -> f64) -> (String, Vec<(f64, f64)>) {
+        let frames = std::iter::once(&self.initial).chain(&self.frames);
+        (self.mode.clone(), frames.enumerate().map(|(i, f)| (i as f64, figure(f))).collect())
+    }
 }
 
 /// A benchmark's frames after the first, as its summary reads them.
