@@ -451,3 +451,45 @@ fn bench_error_writes_its_files_and_reuses_cached_references() {
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown field `warp`"));
 }
+
+#[test]
+fn bench_fairness_reports_each_phase_by_its_own_ticks_and_plots_both() {
+    // Property: each phase's percentiles are percentiles of the ticks it lists (`by_tick_ms`,
+    // `ticks` of them): p50 ≤ p95 ≤ p99, each one of the ticks, with at least half of them at
+    // or below the p50 and at least 95% at or below the p95; the ratios are the phases'. `--plot`
+    // creates its directory and draws a line per phase. Negative controls, by hand: taking the
+    // percentiles of the unsorted ticks fails the counts; plotting one phase fails the legend.
+    let out = out_dir("fairness");
+    let (json, plots) = (out.join("fairness.json"), out.join("new/plots"));
+    let run = relume()
+        .args(["bench", "fairness", "--scenes"])
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes"))
+        .args(["--duration", "1s", "--width", "16", "--height", "16", "--hz", "20", "--spammers", "2", "--json"])
+        .arg(&json)
+        .arg("--plot")
+        .arg(&plots)
+        .output()
+        .unwrap();
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json).unwrap()).unwrap();
+    for phase in ["alone", "under_spam"] {
+        let l = &v[phase];
+        let ticks: Vec<f64> = l["by_tick_ms"].as_array().unwrap().iter().map(|t| t.as_f64().unwrap()).collect();
+        assert!(ticks.len() >= 3 && l["ticks"].as_u64() == Some(ticks.len() as u64), "{phase}: {l}");
+        let p = |q: &str| l[q].as_f64().unwrap();
+        assert!(p("p50_ms") <= p("p95_ms") && p("p95_ms") <= p("p99_ms"), "{phase}: {l}");
+        for (q, share) in [("p50_ms", 0.5), ("p95_ms", 0.95), ("p99_ms", 0.99)] {
+            assert!(ticks.contains(&p(q)), "{phase}: {q} is not one of the ticks");
+            let at_or_below = ticks.iter().filter(|&&t| t <= p(q)).count() as f64;
+            assert!(at_or_below >= share * ticks.len() as f64, "{phase}: {q} has {at_or_below} ticks at or below");
+        }
+    }
+    let ratio = v["under_spam"]["p50_ms"].as_f64().unwrap() / v["alone"]["p50_ms"].as_f64().unwrap();
+    assert_eq!(v["p50_ratio"].as_f64(), Some(ratio));
+    image::open(plots.join("fairness_latency.png")).unwrap();
+    let svg = std::fs::read_to_string(plots.join("fairness_latency.svg")).unwrap();
+    for line in ["alone", "under spam"] {
+        // plotters writes each text element's string on a line of its own.
+        assert!(svg.contains(&format!("\n{line}\n")), "fairness_latency.svg has no {line} line");
+    }
+}

@@ -9,7 +9,8 @@
 //! in progress.
 //!
 //! Without `--url` it starts its own server on 127.0.0.1:0 with the bundled scenes, so nothing
-//! but the two sessions runs on it.
+//! but the two sessions runs on it. `--plot DIR` draws the steady session's latency tick by tick
+//! in both phases (`fairness_latency`).
 use super::load::{percentile, technique};
 use super::UsageError;
 use crate::server::{self, AppState, Limits, ServerConfig};
@@ -52,6 +53,10 @@ pub struct FairnessArgs {
     /// Also write the report as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Also draw the steady session's latency per tick, alone and under the spam, into DIR
+    /// (created if missing), as `fairness_latency.png` and `.svg`.
+    #[arg(long, value_name = "DIR")]
+    pub plot: Option<PathBuf>,
 }
 
 /// The steady session's tick latencies in one phase, milliseconds.
@@ -61,6 +66,8 @@ pub struct Latency {
     pub p50_ms: f64,
     pub p95_ms: f64,
     pub p99_ms: f64,
+    /// Every tick's latency, in the order they ran.
+    pub by_tick_ms: Vec<f64>,
 }
 
 #[derive(Debug, Serialize)]
@@ -126,12 +133,14 @@ async fn steady(client: &Client, id: &str, hz: f64, duration: Duration) -> Resul
         latencies.push(client.tick(id).await?);
         next = (next + period).max(Instant::now());
     }
-    latencies.sort_by(f64::total_cmp);
+    let mut sorted = latencies.clone();
+    sorted.sort_by(f64::total_cmp);
     Ok(Latency {
         ticks: latencies.len(),
-        p50_ms: percentile(&latencies, 50.0),
-        p95_ms: percentile(&latencies, 95.0),
-        p99_ms: percentile(&latencies, 99.0),
+        p50_ms: percentile(&sorted, 50.0),
+        p95_ms: percentile(&sorted, 95.0),
+        p99_ms: percentile(&sorted, 99.0),
+        by_tick_ms: latencies,
     })
 }
 
@@ -194,6 +203,7 @@ pub fn run(args: FairnessArgs) -> Result<()> {
     if !(args.hz > 0.0 && args.hz <= 1000.0) || args.spammers == 0 {
         return Err(UsageError("--hz must lie in (0, 1000] and --spammers be at least 1".into()).into());
     }
+    super::plot::make_dir(args.plot.as_deref())?;
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build()?;
     let report = runtime.block_on(async {
         if let Some(url) = &args.url {
@@ -222,7 +232,22 @@ pub fn run(args: FairnessArgs) -> Result<()> {
         report
     })?;
     print(&report);
-    super::write_json_report(args.json.as_deref(), &report)
+    super::write_json_report(args.json.as_deref(), &report)?;
+    if let Some(dir) = &args.plot {
+        plot(dir, &report)?;
+        println!("  wrote the plot to {}", dir.display());
+    }
+    Ok(())
+}
+
+/// Draws `fairness_latency` into `dir`, which exists.
+fn plot(dir: &std::path::Path, r: &FairnessReport) -> Result<()> {
+    let line = |l: &Latency| l.by_tick_ms.iter().enumerate().map(|(i, &ms)| (i as f64, ms)).collect();
+    let series = vec![("alone".to_string(), line(&r.alone)), ("under spam".to_string(), line(&r.under_spam))];
+    let caption =
+        format!("Steady session's tick latency at {} Hz, alone and with {} spam requests in flight", r.hz, r.spammers);
+    let lines = super::plot::Lines { caption, x: "tick", unit: "ms".into(), series };
+    super::plot::write_both(dir, "fairness_latency", &lines)
 }
 
 fn print(r: &FairnessReport) {
