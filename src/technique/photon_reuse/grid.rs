@@ -18,13 +18,12 @@
 //! - `home[key]` names the cell holding photon `key`, or [`NONE`].
 //!
 //! Units: positions in meters, power in watts.
+use super::cells::{cell_of, pack, CellMap};
 use super::store::PathStore;
 use crate::core::Rgb;
 use crate::scene::{Material, Normals, Scene, Transport};
 use glam::{IVec3, Vec3};
 use rayon::prelude::*;
-use std::collections::HashMap;
-use std::hash::{BuildHasherDefault, Hasher};
 
 /// Least cosine between a photon's surface normal and the query's for the photon to count.
 const FACING_COSINE: f32 = 0.5;
@@ -154,27 +153,6 @@ fn by_slot<T: Copy>(items: &[(u32, T)], slots: usize) -> Vec<(u32, T)> {
     out
 }
 
-/// A cheap hash for cell coordinates (the gather looks up to 27 per query).
-#[derive(Default)]
-pub struct CellHasher(u64);
-
-impl Hasher for CellHasher {
-    fn finish(&self) -> u64 {
-        crate::core::rng::mix64(self.0)
-    }
-    fn write(&mut self, bytes: &[u8]) {
-        for &b in bytes {
-            self.0 = (self.0 ^ b as u64).wrapping_mul(0x100_0000_01B3);
-        }
-    }
-    fn write_i32(&mut self, v: i32) {
-        self.0 = (self.0 ^ v as u32 as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-    }
-}
-
-/// A map keyed by cell coordinates, with the cheap hash.
-type CellMap = HashMap<[i32; 3], u32, BuildHasherDefault<CellHasher>>;
-
 /// One cell's share of an update: its slot, the keys leaving it and the photons entering it.
 type CellChange<'a> = (u32, &'a [(u32, u32)], &'a [(u32, GridPhoton)]);
 
@@ -236,19 +214,6 @@ fn photon_at(
 /// surface (row 0, direct light, is left out by the callers, which start at row 1).
 fn gathered(store: &PathStore, diffuse: &[bool], path: usize, row: usize) -> bool {
     row < store.word[path].photons() as usize && diffuse[store.surfaces.object(store.rows[row].surface[path]) as usize]
-}
-
-/// A photon's cell, clamped to the ±2²⁰ cells a side that [`pack`] orders exactly.
-pub fn cell_of(p: Vec3, inv_cell: f32) -> [i32; 3] {
-    (p * inv_cell).floor().clamp(Vec3::splat(-CELL_LIMIT), Vec3::splat(CELL_LIMIT - 1.0)).as_ivec3().to_array()
-}
-
-const CELL_LIMIT: f32 = (1 << 20) as f32;
-
-/// Cell coordinates as one integer with the same (x, y, z) lexicographic order.
-fn pack(c: [i32; 3]) -> u64 {
-    let field = |v: i32| (v + (1 << 20)) as u64 & ((1 << 21) - 1);
-    (field(c[0]) << 42) | (field(c[1]) << 21) | field(c[2])
 }
 
 fn diffuse_objects(scene: &Scene) -> Vec<bool> {

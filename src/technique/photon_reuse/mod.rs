@@ -83,6 +83,7 @@
 //! objects near the light invalidate most paths; an area-light cell whose sliver of the shape
 //! is tiny may fall back to sampling the whole light; a light that moves every tick never lets
 //! its map settle (the prune and fill then run every tick, as in the paper).
+mod cells;
 mod config;
 pub use config::DESCRIPTION;
 mod distribution;

@@ -10,7 +10,8 @@
 //! would exceed [`MAX_CELLS`] (photons scattered far apart) doubles its cell width until it
 //! fits, so its memory stays bounded; the answers do not depend on the width. Units: scene
 //! units; signs are −1 for a photon taken out and +1 for one put in.
-use super::grid::{cell_of, GridPhoton};
+use super::cells::cell_of;
+use super::grid::GridPhoton;
 use glam::Vec3;
 
 /// Most cells in the block (4 bytes each).
