@@ -233,10 +233,7 @@ pub fn run(args: FairnessArgs) -> Result<()> {
     })?;
     print(&report);
     super::write_json_report(args.json.as_deref(), &report)?;
-    if let Some(dir) = &args.plot {
-        plot(dir, &report)?;
-        println!("  wrote the plot to {}", dir.display());
-    }
+    super::plot::draw_into(args.plot.as_deref(), |dir| plot(dir, &report))?;
     Ok(())
 }
 

@@ -307,9 +307,6 @@ pub fn run(args: IcacheArgs) -> Result<()> {
     let report = measure(&args)?;
     print_table(&report, args.audit);
     super::write_json_report(args.run.json.as_deref(), &report)?;
-    if let Some(dir) = &args.plot {
-        plot(dir, &report)?;
-        println!("  wrote the plots to {}", dir.display());
-    }
+    super::plot::draw_into(args.plot.as_deref(), |dir| plot(dir, &report))?;
     Ok(())
 }

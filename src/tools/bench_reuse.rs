@@ -253,9 +253,6 @@ pub fn run(args: ReuseArgs) -> Result<()> {
     let report = measure(&args)?;
     print_table(&report);
     super::write_json_report(args.run.json.as_deref(), &report)?;
-    if let Some(dir) = &args.plot {
-        plot(dir, &report)?;
-        println!("  wrote the plots to {}", dir.display());
-    }
+    super::plot::draw_into(args.plot.as_deref(), |dir| plot(dir, &report))?;
     Ok(())
 }

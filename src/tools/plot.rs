@@ -80,6 +80,16 @@ pub fn make_dir(dir: Option<&Path>) -> Result<(), super::UsageError> {
     }
 }
 
+/// After a run, draws into `--plot`'s directory (made by [`make_dir`] before it), if one was
+/// asked for, and says where.
+pub fn draw_into(dir: Option<&Path>, draw: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    if let Some(dir) = dir {
+        draw(dir)?;
+        println!("  wrote the plots to {}", dir.display());
+    }
+    Ok(())
+}
+
 /// Draws `plot` into `<stem>.png` and `<stem>.svg` under `dir`.
 pub fn write_both<P: Plot>(dir: &Path, stem: &str, plot: &P) -> Result<()> {
     let png = dir.join(format!("{stem}.png"));

@@ -425,10 +425,7 @@ pub fn run(args: LoadArgs) -> Result<()> {
     let report = runtime.block_on(run_load(&args))?;
     print_table(&report);
     super::write_json_report(args.json.as_deref(), &report)?;
-    if let Some(dir) = &args.plot {
-        plot(dir, &report)?;
-        println!("  wrote the plot to {}", dir.display());
-    }
+    super::plot::draw_into(args.plot.as_deref(), |dir| plot(dir, &report))?;
     if report.errors > 0 || report.lost_edits != 0 {
         return Err(anyhow::anyhow!("{} errors, {} edits lost", report.errors, report.lost_edits));
     }
