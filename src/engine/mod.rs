@@ -17,6 +17,11 @@
 //!    frame beside the denoised one. A film unchanged since the last tick ([`Film::version`])
 //!    is not denoised again: the last output stands (`denoise_reused`).
 //!
+//! A session can switch technique between ticks ([`Session::set_technique`]): the scene keeps its
+//! edits and the queue its pending ones, the new technique is built fresh, and the next tick
+//! restarts the film, as a snapshot restored with that technique would. A switch to the
+//! configuration already running changes nothing.
+//!
 //! Nothing traces while Embree commits: the phases run in order inside one session. The engine
 //! never touches tokio or axum; callers run `tick` on a rayon pool made by [`thread_pool`].
 mod denoise;
@@ -120,6 +125,8 @@ pub struct Session {
     denoised_tick: u64,
     /// Set by [`Session::resume`]: the next tick's stats say the session was restored.
     restored: bool,
+    /// Set by [`Session::set_technique`]: the next tick restarts the film.
+    switched: bool,
 }
 
 /// Where a session stands between ticks, beyond its scene: what a snapshot carries so another
@@ -156,6 +163,7 @@ impl Session {
             resolved: None,
             denoised_tick: 0,
             restored: false,
+            switched: false,
         })
     }
 
@@ -181,6 +189,19 @@ impl Session {
         self.film.accumulation_id = progress.accumulation_id;
         self.restored = true;
         Ok(())
+    }
+
+    /// Runs `config` from the next tick on, built fresh on the scene as edited; the pending
+    /// edits stay queued and that tick restarts the film. Returns `false`, changing nothing,
+    /// when `config` is the configuration running. On an error the session keeps its technique.
+    pub fn set_technique(&mut self, config: &TechniqueConfig) -> Result<bool, EngineError> {
+        if *config == self.config {
+            return Ok(false);
+        }
+        self.technique = technique::build(config, &self.scene)?;
+        self.config = config.clone();
+        self.switched = true;
+        Ok(true)
     }
 
     /// Denoises every frame from the next tick on (OIDN's device and filter are made now, once).
@@ -250,7 +271,8 @@ impl Session {
         let t = Instant::now();
         let ctx = RenderContext { scene: &self.scene, accel: &self.accel, seed: self.seed, tick: self.tick };
         let update = self.technique.update(&ctx, &delta)?;
-        if self.technique.restarts_whole_film(&delta) || self.restored {
+        let switched = std::mem::take(&mut self.switched);
+        if self.technique.restarts_whole_film(&delta) || self.restored || switched {
             self.film.reset();
         }
         if let Some(stage) = &mut self.denoise {
