@@ -251,6 +251,7 @@ const ROUTES: &[(&str, &str)] = &[
     ("GET", "/v1/sessions/{id}/frame.png?tick=1"),
     ("GET", "/v1/sessions/{id}/stats"),
     ("DELETE", "/v1/sessions/{id}"),
+    ("PATCH", "/v1/sessions/{id}"),
     ("GET", "/v1/sessions/{id}/scene"),
     ("GET", "/v1/sessions/{id}/snapshot"),
     ("POST", "/v1/sessions/nope/edits"),
@@ -282,7 +283,13 @@ fn a_real_server_answers_every_mutated_request_below_500() {
         s.http.delete(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap();
         snap
     });
-    let seeds = vec![create, examples("edits.request.json"), json!({}), json!({ "snapshot": snapshot })];
+    let seeds = vec![
+        create,
+        examples("edits.request.json"),
+        examples("update-session.request.json"),
+        json!({}),
+        json!({ "snapshot": snapshot }),
+    ];
     let body = prop_oneof![4 => mutated(seeds).prop_map(|v| v.to_string().into_bytes()), 1 => prop::collection::vec(any::<u8>(), 0..64)];
     let strategy = (0..ROUTES.len(), body, any::<bool>());
     runner(60)
@@ -297,6 +304,7 @@ fn a_real_server_answers_every_mutated_request_below_500() {
                 let url = s.url(&path.replace("{id}", &id));
                 let req = match method {
                     "POST" => s.http.post(url).body(body),
+                    "PATCH" => s.http.patch(url).body(body),
                     "DELETE" => s.http.delete(url),
                     _ => s.http.get(url),
                 };

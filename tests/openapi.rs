@@ -58,6 +58,9 @@ async fn routes_match_the_spec() {
         for m in METHODS {
             let method = reqwest::Method::from_bytes(m.to_uppercase().as_bytes()).unwrap();
             let mut req = s.http.request(method, s.url(&concrete));
+            if m == "patch" {
+                req = req.header("content-type", "application/json").body(r#"{"technique":{"id":"path"}}"#);
+            }
             if m == "post" {
                 req = req.header("content-type", "application/json").body(if path.ends_with("/sessions") {
                     r#"{"scene":"cornell-box","width":8,"height":8}"#

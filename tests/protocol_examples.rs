@@ -21,6 +21,7 @@ fn every_golden_example_round_trips() {
     let mut n = 0;
     n += round_trip::<CreateSession>("create-session.request.json");
     n += round_trip::<SessionView>("create-session.response.json");
+    n += round_trip::<UpdateSession>("update-session.request.json");
     n += round_trip::<EditBatch>("edits.request.json");
     n += round_trip::<EditsAccepted>("edits.response.json");
     n += round_trip::<TickDone>("tick.response.json");

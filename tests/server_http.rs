@@ -162,6 +162,9 @@ async fn bad_inputs_get_their_4xx_and_harm_nothing() {
         let r = s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
         assert_eq!(r.status(), 200, "session {id} harmed");
     }
+    // The refused switches left the victim running what it ran.
+    let view: Value = s.http.get(s.url(&v(""))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(view["technique"]["id"], "path", "{view}");
     // Nothing from the rejected batches was queued: the victim's tick applied no edits.
     let hist: Value = s.http.get(s.url(&v("/stats"))).send().await.unwrap().json().await.unwrap();
     assert_eq!(hist["stats"][0]["edits_received"], 0);
@@ -211,6 +214,13 @@ fn bad_cases(victim: &str) -> Vec<BadCase> {
         ("POST", v("/edits"), Some(r#"{"edits": {"target": "camera"}}"#.into()), 422, "invalid type"),
         ("POST", v("/edits"), Some(many), 413, "limit of 10"),
         ("POST", v("/edits"), Some(huge), 413, "request body"),
+        ("PATCH", v(""), Some("{}".into()), 422, "missing field `technique`"),
+        ("PATCH", v(""), Some(r#"{"technique": {"id": "magic"}}"#.into()), 422, "unknown variant"),
+        ("PATCH", v(""), Some(r#"{"technique": {"id": "path"}, "scene": "maze"}"#.into()), 422, "unknown field"),
+        ("PATCH", v(""), Some(r#"{"technique": {"id": "path", "spp": 1000000}}"#.into()), 413, "technique.spp"),
+        ("PATCH", v(""), Some(r#"{"technique": {"id": "path", "spp": 0}}"#.into()), 422, "technique"),
+        ("PATCH", v(""), Some(r#"{"technique": {"id": "photon_reuse", "paths": 4000000000}}"#.into()), 413, "technique.paths"),
+        ("PATCH", "/v1/sessions/nope".into(), Some(r#"{"technique": {"id": "path"}}"#.into()), 404, "no session"),
         ("GET", v("/frame.gif"), None, 404, "frame.png"),
         ("GET", v("/frame.png?tick=abc"), None, 422, "query"),
         ("GET", v("/frame.png?exposure=1e39"), None, 422, "exposure"),
@@ -225,6 +235,7 @@ async fn answers_with_its_4xx(s: &TestServer, (method, path, body, status, words
     let mut req = match *method {
         "GET" => s.http.get(s.url(path)),
         "POST" => s.http.post(s.url(path)),
+        "PATCH" => s.http.patch(s.url(path)),
         _ => s.http.delete(s.url(path)),
     };
     if let Some(b) = body {

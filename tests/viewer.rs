@@ -150,6 +150,20 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
             .clone()
     };
     assert_ne!(bunny(&scene), bunny(&bundled), "the drag did not move the bunny");
+    // Switching technique keeps the session and the bunny where the drag left it.
+    let acc = c.execute("return window.relume.accumulation", vec![]).await.unwrap().as_u64();
+    c.execute(
+        "const t = document.getElementById('technique'); t.value = 'instant_cache'; t.dispatchEvent(new Event('change')); \
+         document.getElementById('param-vpls').value = '64'; document.getElementById('switch').click();",
+        vec![],
+    )
+    .await
+    .unwrap();
+    wait_for(&c, "return window.relume.accumulation", |v| v.as_u64() > acc, "a frame after the switch").await;
+    let view = server.get_json(&format!("/v1/sessions/{id}")).await;
+    assert_eq!((&view["technique"]["id"], &view["technique"]["vpls"]), (&json!("instant_cache"), &json!(64)));
+    let switched = server.get_json(&format!("/v1/sessions/{id}/scene")).await;
+    assert_eq!(bunny(&switched), bunny(&scene), "the switch lost the drag");
     // The stats panel shows the tick's numbers.
     let stats_rows = c.execute("return document.querySelectorAll('#stats tr').length", vec![]).await.unwrap();
     assert!(stats_rows.as_u64() >= Some(5));

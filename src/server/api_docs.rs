@@ -30,6 +30,7 @@ pub const FILES: &[(&str, &str)] = proto_files![
     "examples/scenes.response.json",
     "examples/stats.response.json",
     "examples/tick.response.json",
+    "examples/update-session.request.json",
     "examples/ws-client-edits.json",
     "examples/ws-client-pause.json",
     "examples/ws-client-play.json",

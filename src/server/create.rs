@@ -8,7 +8,8 @@
 use super::error::ApiError;
 use super::protocol::{CreateSession, PlayingAnimation, SessionView};
 use super::state::{
-    bundled_scene_file, valid_scene_name, view, AppState, Reservation, SessionEntry, SessionSettings, MIN_TICK_HZ,
+    bundled_scene_file, valid_scene_name, view, AppState, Limits, Reservation, SessionEntry, SessionSettings,
+    MIN_TICK_HZ,
 };
 use super::worker::{SessionHandle, WorkerContext};
 use crate::engine::{Progress, Session};
@@ -28,6 +29,7 @@ pub(super) struct Plan {
     /// Folder of the scene file, where its animations live (`None` for inline scenes).
     pub scene_dir: Option<PathBuf>,
     pub scene: Scene,
+    pub technique: TechniqueConfig,
     pub settings: SessionSettings,
     /// A restore: where the snapshot's session stood, and what it was playing.
     pub resume: Option<(Progress, Option<PlayingAnimation>)>,
@@ -138,37 +140,22 @@ impl AppState {
         };
         let LoadedScene { scene, warnings, animations } = loaded;
         let (width, height) = (req.width.unwrap_or(scene.camera.width), req.height.unwrap_or(scene.camera.height));
-        let settings = SessionSettings {
-            technique: req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default())),
-            width,
-            height,
-            seed: req.seed,
-            tick_hz: req.tick_hz,
-            denoise: req.denoise,
-        };
-        Ok(Plan { scene_name, scene_dir, scene, settings, resume: None, field: "", warnings, animations })
+        let technique = req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default()));
+        let settings = SessionSettings { width, height, seed: req.seed, tick_hz: req.tick_hz, denoise: req.denoise };
+        Ok(Plan { scene_name, scene_dir, scene, technique, settings, resume: None, field: "", warnings, animations })
     }
 
     /// Checks a plan against the limits, builds its session and starts its worker.
     fn start(&self, mut plan: Plan, reservation: Reservation) -> Result<SessionView, ApiError> {
         self.check_plan(&plan)?;
         plan.scene.set_resolution(plan.settings.width, plan.settings.height);
-        let pixels = u64::from(plan.settings.width) * u64::from(plan.settings.height);
-        let memory_bytes = self.check_memory(&plan, pixels)?;
-        let memory = reservation.memory(memory_bytes, self.config.limits.server_memory)?;
+        let limits = &self.config.limits;
+        let memory_bytes = session_bytes(limits, &plan.technique, &plan.settings, &plan.scene, plan.field)?;
+        let memory = reservation.memory(memory_bytes, limits.server_memory)?;
         let f = plan.field;
         let settings = plan.settings;
         let mut session =
-            Session::new(plan.scene, &settings.technique, settings.seed, &self.device).map_err(|e| match e {
-                crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
-                    ApiError::invalid(format!("{f}technique: {t}"))
-                }
-                crate::engine::EngineError::Technique(t @ TechniqueError::TooLarge { .. }) => {
-                    ApiError::too_large(format!("{f}technique.{t}"))
-                }
-                crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("{f}scene: {s}")),
-                other => ApiError::internal(other.to_string()),
-            })?;
+            Session::new(plan.scene, &plan.technique, settings.seed, &self.device).map_err(|e| engine_error(f, e))?;
         if let Some(denoise) = settings.denoise {
             session.enable_denoise(denoise).map_err(denoise_error)?;
         }
@@ -228,20 +215,7 @@ impl AppState {
                 limits.max_side, limits.max_pixels
             )));
         }
-        if settings.technique.spp_per_tick() > limits.max_spp_per_tick {
-            return Err(ApiError::too_large(format!(
-                "{f}technique.spp: {} exceeds the limit of {} per tick",
-                settings.technique.spp_per_tick(),
-                limits.max_spp_per_tick
-            )));
-        }
-        if settings.technique.photon_paths() > limits.max_photon_paths {
-            return Err(ApiError::too_large(format!(
-                "{f}technique.paths: {} exceeds the limit of {} photon paths per session",
-                settings.technique.photon_paths(),
-                limits.max_photon_paths
-            )));
-        }
+        check_technique(limits, &plan.technique, f)?;
         match settings.tick_hz {
             Some(hz) if !(hz.is_finite() && (MIN_TICK_HZ..=limits.max_tick_hz).contains(&hz)) => {
                 Err(ApiError::invalid(format!(
@@ -267,33 +241,76 @@ impl AppState {
         r.sessions += 1;
         Ok(Reservation { table: self.reserved.clone() })
     }
+}
 
-    /// The session's estimated resident bytes (technique and film), refused with 413 naming
-    /// the technique's sizing field when over `session_memory`.
-    fn check_memory(&self, plan: &Plan, pixels: u64) -> Result<u64, ApiError> {
-        let (f, limit) = (plan.field, self.config.limits.session_memory);
-        let estimate = plan.settings.technique.resident_estimate(&plan.scene, pixels).map_err(|e| match e {
-            TechniqueError::TooLarge { .. } => ApiError::too_large(format!("{f}technique.{e}")),
-            other => ApiError::invalid(format!("{f}technique: {other}")),
-        })?;
-        let film = pixels * crate::film::Film::BYTES_PER_PIXEL;
-        let denoiser = plan.settings.denoise.map_or(0, |d| d.resident_estimate(pixels));
-        let bytes = estimate.bytes.saturating_add(film).saturating_add(denoiser);
-        if bytes > limit && denoiser > 0 && estimate.bytes.saturating_add(film) <= limit {
-            return Err(ApiError::too_large(format!(
-                "{f}denoise: the session would hold about {} MiB with its denoiser, above the {} MiB a session may hold (--session-memory)",
-                bytes >> 20,
-                limit >> 20
-            )));
+/// A technique's spp per tick and photon paths against the limits (413 naming the field under
+/// `f`).
+pub(super) fn check_technique(limits: &Limits, technique: &TechniqueConfig, f: &str) -> Result<(), ApiError> {
+    if technique.spp_per_tick() > limits.max_spp_per_tick {
+        return Err(ApiError::too_large(format!(
+            "{f}technique.spp: {} exceeds the limit of {} per tick",
+            technique.spp_per_tick(),
+            limits.max_spp_per_tick
+        )));
+    }
+    if technique.photon_paths() > limits.max_photon_paths {
+        return Err(ApiError::too_large(format!(
+            "{f}technique.paths: {} exceeds the limit of {} photon paths per session",
+            technique.photon_paths(),
+            limits.max_photon_paths
+        )));
+    }
+    Ok(())
+}
+
+/// A session's estimated resident bytes (technique, film and denoiser) with `technique` and
+/// `settings` on `scene`, refused with 413 naming the technique's sizing field (or `denoise`)
+/// when over `session_memory`.
+pub(super) fn session_bytes(
+    limits: &Limits,
+    technique: &TechniqueConfig,
+    settings: &SessionSettings,
+    scene: &Scene,
+    f: &str,
+) -> Result<u64, ApiError> {
+    let limit = limits.session_memory;
+    let pixels = u64::from(settings.width) * u64::from(settings.height);
+    let estimate = technique.resident_estimate(scene, pixels).map_err(|e| match e {
+        TechniqueError::TooLarge { .. } => ApiError::too_large(format!("{f}technique.{e}")),
+        other => ApiError::invalid(format!("{f}technique: {other}")),
+    })?;
+    let film = pixels * crate::film::Film::BYTES_PER_PIXEL;
+    let denoiser = settings.denoise.map_or(0, |d| d.resident_estimate(pixels));
+    let bytes = estimate.bytes.saturating_add(film).saturating_add(denoiser);
+    if bytes > limit && denoiser > 0 && estimate.bytes.saturating_add(film) <= limit {
+        return Err(ApiError::too_large(format!(
+            "{f}denoise: the session would hold about {} MiB with its denoiser, above the {} MiB a session may hold (--session-memory)",
+            bytes >> 20,
+            limit >> 20
+        )));
+    }
+    if bytes > limit {
+        return Err(ApiError::too_large(format!(
+            "{f}technique.{}: the session would hold about {} MiB, above the {} MiB a session may hold (--session-memory)",
+            estimate.field,
+            bytes >> 20,
+            limit >> 20
+        )));
+    }
+    Ok(bytes)
+}
+
+/// A session or technique that could not be built: 422 for a configuration it refuses, 413
+/// past a size, 500 otherwise; `f` prefixes the field.
+pub(super) fn engine_error(f: &str, e: crate::engine::EngineError) -> ApiError {
+    match e {
+        crate::engine::EngineError::Technique(t @ TechniqueError::InvalidConfig { .. }) => {
+            ApiError::invalid(format!("{f}technique: {t}"))
         }
-        if bytes > limit {
-            return Err(ApiError::too_large(format!(
-                "{f}technique.{}: the session would hold about {} MiB, above the {} MiB a session may hold (--session-memory)",
-                estimate.field,
-                bytes >> 20,
-                limit >> 20
-            )));
+        crate::engine::EngineError::Technique(t @ TechniqueError::TooLarge { .. }) => {
+            ApiError::too_large(format!("{f}technique.{t}"))
         }
-        Ok(bytes)
+        crate::engine::EngineError::Scene(s) => ApiError::invalid(format!("{f}scene: {s}")),
+        other => ApiError::internal(other.to_string()),
     }
 }

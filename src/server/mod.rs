@@ -193,7 +193,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/scenes", get(routes::list_scenes))
         .route("/techniques", get(routes::list_techniques))
         .route("/sessions", post(routes::create_session).get(routes::list_sessions))
-        .route("/sessions/{id}", get(routes::get_session).delete(routes::delete_session))
+        .route("/sessions/{id}", get(routes::get_session).patch(routes::update_session).delete(routes::delete_session))
         .route("/sessions/{id}/scene", get(routes::get_scene))
         .route("/sessions/{id}/edits", post(routes::post_edits))
         .route("/sessions/{id}/tick", post(routes::post_tick))
@@ -232,7 +232,7 @@ fn cors(origins: &[String]) -> Option<tower_http::cors::CorsLayer> {
     (!allowed.is_empty()).then(|| {
         tower_http::cors::CorsLayer::new()
             .allow_origin(allowed)
-            .allow_methods([Method::GET, Method::POST, Method::DELETE])
+            .allow_methods([Method::GET, Method::POST, Method::PATCH, Method::DELETE])
             .allow_headers([header::CONTENT_TYPE, header::AUTHORIZATION])
     })
 }

@@ -70,6 +70,15 @@ fn default_seed() -> u64 {
     1
 }
 
+/// `PATCH /v1/sessions/{id}`: what to change in a running session.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UpdateSession {
+    /// The technique to run from the next tick on, in [`CreateSession::technique`]'s format;
+    /// the scene keeps its edits.
+    pub technique: TechniqueConfig,
+}
+
 /// The one snapshot format this server writes and reads.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub enum SnapshotFormat {

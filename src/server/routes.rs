@@ -3,7 +3,7 @@ use super::encoded::EncodingKey;
 use super::error::ApiError;
 use super::protocol::{
     CreateSession, EditBatch, SceneList, SessionList, SessionView, StatsHistory, TechniqueEntry, TechniqueList,
-    TickDone,
+    TickDone, UpdateSession,
 };
 use super::state::{view, AppState, SessionEntry};
 use super::worker::PublishedFrame;
@@ -171,6 +171,26 @@ pub async fn list_sessions(State(s): State<Shared>) -> Result<Json<SessionList>,
 
 pub async fn get_session(State(s): State<Shared>, Path(id): Path<String>) -> Result<Json<SessionView>, ApiError> {
     let entry = s.session(&id)?;
+    Ok(Json(view(&entry)))
+}
+
+/// Switches the session's technique from its next tick on, keeping its scene as edited and its
+/// queued edits (`PATCH /v1/sessions/{id}`). The new configuration is checked against the limits
+/// as a create's is (spp, photon paths, `--session-memory`), and the session's share of
+/// `--server-memory` is resized to it; a configuration equal to the running one changes nothing.
+pub async fn update_session(
+    State(s): State<Shared>,
+    Path(id): Path<String>,
+    ApiJson(req): ApiJson<UpdateSession>,
+) -> Result<Json<SessionView>, ApiError> {
+    let entry = s.session(&id)?;
+    let limits = s.config.limits.clone();
+    super::create::check_technique(&limits, &req.technique, "")?;
+    let (technique, settings) = (req.technique.clone(), entry.settings.clone());
+    let server_memory = limits.server_memory;
+    let bytes: super::worker::SessionBytes =
+        Box::new(move |scene| super::create::session_bytes(&limits, &technique, &settings, scene, ""));
+    entry.handle.set_technique(req.technique, bytes, server_memory).await?;
     Ok(Json(view(&entry)))
 }
 

@@ -31,7 +31,7 @@ pub fn snapshot_of(entry: &SessionEntry, parts: SnapshotParts) -> Snapshot {
         session: entry.id.clone(),
         scene_name: entry.scene.clone(),
         scene: parts.scene,
-        technique: entry.settings.technique.clone(),
+        technique: parts.technique,
         seed: entry.settings.seed,
         tick_hz: entry.settings.tick_hz,
         denoise: entry.settings.denoise,
@@ -98,7 +98,6 @@ impl AppState {
             pending: snapshot.pending_edits,
         };
         let settings = SessionSettings {
-            technique: snapshot.technique,
             width,
             height,
             seed: snapshot.seed,
@@ -109,6 +108,7 @@ impl AppState {
             scene_name,
             scene_dir,
             scene,
+            technique: snapshot.technique,
             settings,
             resume: Some((progress, snapshot.animation)),
             field: "snapshot.",

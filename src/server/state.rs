@@ -6,7 +6,6 @@ use super::worker::SessionHandle;
 use crate::embree::Device;
 use crate::film::DenoiseSettings;
 use crate::scene::SceneBudget;
-use crate::technique::TechniqueConfig;
 use axum::http::StatusCode;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -124,11 +123,12 @@ pub struct Access {
     pub origins: Vec<String>,
 }
 
-/// What a session runs with besides its scene: checked against the limits when it is created,
-/// shown in its view and carried by its snapshot.
+/// What a session runs with besides its scene and its technique, fixed for its life: checked
+/// against the limits when it is created, shown in its view and carried by its snapshot. The
+/// technique can change (`PATCH /v1/sessions/{id}`), so its worker publishes the one running
+/// ([`super::worker::SessionHandle::technique`]).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SessionSettings {
-    pub technique: TechniqueConfig,
     pub width: u32,
     pub height: u32,
     pub seed: u64,
@@ -173,21 +173,9 @@ pub struct Reservation {
 impl Reservation {
     /// Reserves `bytes` of the server's memory budget unless its total would exceed `limit`.
     pub(super) fn memory(&self, bytes: u64, limit: u64) -> Result<MemoryReservation, ApiError> {
-        let mut r = self.table.lock().map_err(|_| ApiError::internal("reservation lock poisoned"))?;
-        if r.bytes.saturating_add(bytes) > limit {
-            return Err(ApiError::new(
-                StatusCode::TOO_MANY_REQUESTS,
-                "server_memory_full",
-                format!(
-                    "the session would hold about {} MiB; the server's sessions already hold {} of its {} MiB (--server-memory)",
-                    bytes >> 20,
-                    r.bytes >> 20,
-                    limit >> 20
-                ),
-            ));
-        }
-        r.bytes += bytes;
-        Ok(MemoryReservation { table: self.table.clone(), bytes })
+        let mut held = MemoryReservation { table: self.table.clone(), bytes: 0 };
+        held.resize(bytes, limit)?;
+        Ok(held)
     }
 }
 
@@ -204,6 +192,29 @@ impl Drop for Reservation {
 pub struct MemoryReservation {
     table: Arc<std::sync::Mutex<Reserved>>,
     bytes: u64,
+}
+
+impl MemoryReservation {
+    /// Holds `bytes` instead of what it holds, unless the server's total would then exceed
+    /// `limit` (429 `server_memory_full`, holding what it held). Returns the bytes held before.
+    pub(super) fn resize(&mut self, bytes: u64, limit: u64) -> Result<u64, ApiError> {
+        let mut r = self.table.lock().map_err(|_| ApiError::internal("reservation lock poisoned"))?;
+        let others = r.bytes - self.bytes;
+        if others.saturating_add(bytes) > limit {
+            return Err(ApiError::new(
+                StatusCode::TOO_MANY_REQUESTS,
+                "server_memory_full",
+                format!(
+                    "the session would hold about {} MiB; the server's other sessions already hold {} of its {} MiB (--server-memory)",
+                    bytes >> 20,
+                    others >> 20,
+                    limit >> 20
+                ),
+            ));
+        }
+        r.bytes = others + bytes;
+        Ok(std::mem::replace(&mut self.bytes, bytes))
+    }
 }
 
 impl Drop for MemoryReservation {
@@ -435,7 +446,7 @@ pub fn view(e: &SessionEntry) -> SessionView {
     SessionView {
         id: e.id.clone(),
         scene: e.scene.clone(),
-        technique: e.settings.technique.clone(),
+        technique: e.handle.technique(),
         width: e.settings.width,
         height: e.settings.height,
         seed: e.settings.seed,

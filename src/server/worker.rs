@@ -26,6 +26,7 @@ use super::state::MemoryReservation;
 use super::turns::Turns;
 use crate::engine::{Session, TickStats};
 use crate::scene::edits::Edit;
+use crate::technique::TechniqueConfig;
 use axum::http::StatusCode;
 use std::collections::VecDeque;
 use std::panic::AssertUnwindSafe;
@@ -79,16 +80,30 @@ pub enum Command {
     Snapshot {
         reply: oneshot::Sender<Result<SnapshotParts, ApiError>>,
     },
+    /// Runs `technique` from the next tick on (`PATCH /v1/sessions/{id}`), if the session's
+    /// estimated bytes with it, worked out by `bytes` on the scene as edited, fit its share of
+    /// `server_memory`. Answers whether anything changed.
+    Technique {
+        technique: TechniqueConfig,
+        bytes: SessionBytes,
+        server_memory: u64,
+        reply: oneshot::Sender<Result<bool, ApiError>>,
+    },
     Shutdown,
     /// Panics inside a tick's turn, as a failing technique would (tests of the failure path).
     #[cfg(test)]
     Panic,
 }
 
-/// What a snapshot takes from the worker: the scene with its edits applied, the session's
-/// progress, and the animation playing with its clock now.
+/// A session's estimated resident bytes with a new technique, from its scene (checked against
+/// `--session-memory` by the server, which knows the limits).
+pub type SessionBytes = Box<dyn FnOnce(&crate::scene::Scene) -> Result<u64, ApiError> + Send>;
+
+/// What a snapshot takes from the worker: the scene with its edits applied, the technique
+/// running, the session's progress, and the animation playing with its clock now.
 pub struct SnapshotParts {
     pub scene: crate::scene::SceneDesc,
+    pub technique: TechniqueConfig,
     pub progress: crate::engine::Progress,
     pub animation: Option<PlayingAnimation>,
 }
@@ -100,6 +115,8 @@ pub struct SessionHandle {
     pub frames: watch::Receiver<Option<Arc<PublishedFrame>>>,
     pub history: Arc<Mutex<VecDeque<TickStats>>>,
     pub failure: Arc<Mutex<Option<String>>>,
+    /// The technique running, which its worker publishes when it switches.
+    technique: Arc<Mutex<TechniqueConfig>>,
     /// The last encodings of its frames, shared by every client.
     pub encoded: super::encoded::EncodedFrames,
     thread: Mutex<Option<JoinHandle<()>>>,
@@ -123,7 +140,7 @@ struct Live {
     session: Session,
     publish: watch::Sender<Option<Arc<PublishedFrame>>>,
     /// The session's share of `--server-memory`, given back when it fails or is deleted.
-    _memory: MemoryReservation,
+    memory: MemoryReservation,
 }
 
 /// What the worker needs from the server to run a session.
@@ -140,6 +157,7 @@ struct Worker {
     context: WorkerContext,
     history: Arc<Mutex<VecDeque<TickStats>>>,
     failure: Arc<Mutex<Option<String>>>,
+    technique: Arc<Mutex<TechniqueConfig>>,
     tick_waiters: TickWaiters,
     /// When the last tick started.
     last_tick: Option<Instant>,
@@ -212,6 +230,31 @@ impl Worker {
         Ok(EditsAccepted { queued, pending: session.pending_edits(), seq })
     }
 
+    /// Switches the technique between ticks: resizes the session's memory share to what
+    /// `bytes` estimates (given back if the build fails), builds the new technique on the
+    /// scene as edited, and publishes it. A configuration equal to the running one changes
+    /// nothing and is not estimated.
+    fn switch(
+        &mut self,
+        technique: TechniqueConfig,
+        bytes: SessionBytes,
+        server_memory: u64,
+    ) -> Result<bool, ApiError> {
+        let live = self.live()?;
+        if *live.session.config() == technique {
+            return Ok(false);
+        }
+        let before = live.memory.resize(bytes(live.session.scene())?, server_memory)?;
+        if let Err(e) = live.session.set_technique(&technique) {
+            live.memory.resize(before, u64::MAX)?;
+            return Err(super::create::engine_error("", e));
+        }
+        if let Ok(mut t) = self.technique.lock() {
+            *t = technique;
+        }
+        Ok(true)
+    }
+
     /// Runs one tick in this session's turn on the pool, catching panics; on success publishes
     /// the frame, on failure fails the session.
     fn tick(&mut self) -> Result<TickStats, ApiError> {
@@ -272,12 +315,14 @@ impl SessionHandle {
         let (publish, frames) = watch::channel(None);
         let history = Arc::new(Mutex::new(VecDeque::new()));
         let failure = Arc::new(Mutex::new(None));
+        let technique = Arc::new(Mutex::new(session.config().clone()));
         let tick_waiters = TickWaiters::default();
         let worker = Worker {
-            live: Some(Live { session, publish, _memory: memory }),
+            live: Some(Live { session, publish, memory }),
             context,
             history: history.clone(),
             failure: failure.clone(),
+            technique: technique.clone(),
             tick_waiters: tick_waiters.clone(),
             last_tick: None,
         };
@@ -290,6 +335,7 @@ impl SessionHandle {
             frames,
             history,
             failure,
+            technique,
             encoded: Default::default(),
             thread: Mutex::new(Some(thread)),
         })
@@ -310,6 +356,27 @@ impl SessionHandle {
 
     pub fn failure(&self) -> Option<String> {
         self.failure.lock().ok().and_then(|f| f.clone())
+    }
+
+    /// The technique the session runs now.
+    pub fn technique(&self) -> TechniqueConfig {
+        match self.technique.lock() {
+            Ok(t) => t.clone(),
+            Err(poisoned) => poisoned.into_inner().clone(),
+        }
+    }
+
+    /// Switches to `technique` from the next tick on, keeping the scene as edited and the
+    /// queued edits (see [`Command::Technique`]). Answers whether anything changed.
+    pub async fn set_technique(
+        &self,
+        technique: TechniqueConfig,
+        bytes: SessionBytes,
+        server_memory: u64,
+    ) -> Result<bool, ApiError> {
+        let (reply, answer) = oneshot::channel();
+        self.send(Command::Technique { technique, bytes, server_memory, reply })?;
+        answer.await.map_err(|_| gone())?
     }
 
     pub async fn edits(&self, batch: Vec<Edit>) -> Result<EditsAccepted, ApiError> {
@@ -487,6 +554,7 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, resto
             Wake::Command(Command::Snapshot { reply }) => {
                 let parts = w.live().map(|l| SnapshotParts {
                     scene: l.session.scene().desc().clone(),
+                    technique: l.session.config().clone(),
                     progress: l.session.progress(),
                     animation: playing.as_ref().map(Playing::now),
                 });
@@ -497,6 +565,9 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, resto
                 if tick_hz.is_none() {
                     next_tick = None;
                 }
+            }
+            Wake::Command(Command::Technique { technique, bytes, server_memory, reply }) => {
+                let _ = reply.send(w.switch(technique, bytes, server_memory));
             }
             Wake::Command(Command::Scene { reply }) => {
                 let _ = reply.send(w.live().map(|l| l.session.scene().desc().clone()));

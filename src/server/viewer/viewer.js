@@ -213,7 +213,21 @@ async function start(glb) {
     const animations = (s.animations || []).length ? s.animations : entry ? entry.animations : [];
     $("animation").innerHTML = animations.map((a) => `<option>${a}</option>`).join("");
     connect(s.id);
+    $("switch").disabled = false;
     status(`session ${s.id}` + (s.warnings ? ` — ${s.warnings.length} load warning(s): ${s.warnings.join("; ")}` : ""));
+  } catch (e) {
+    status("error: " + e.message);
+  }
+}
+
+// Runs the picked technique and parameters on this session from its next tick on, keeping its
+// scene as moved (PATCH /v1/sessions/{id}); the plots start over with it.
+async function switchTechnique() {
+  if (!state.id) return;
+  try {
+    const s = await api(`/v1/sessions/${state.id}`, { method: "PATCH", body: JSON.stringify({ technique: techniqueConfig() }) });
+    state.history = [];
+    status(`session ${s.id} — now running ${s.technique.id}`);
   } catch (e) {
     status("error: " + e.message);
   }
@@ -322,6 +336,7 @@ function installDrag() {
 }
 
 $("start").addEventListener("click", () => start());
+$("switch").addEventListener("click", switchTechnique);
 $("technique").addEventListener("change", showParams);
 $("raw").addEventListener("change", subscribe);
 // Leaving the page deletes its session rather than leaving it to the server's idle expiry.
