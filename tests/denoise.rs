@@ -25,7 +25,7 @@ fn run(seed: u64, ticks: u32, denoise: Option<DenoiseSettings>) -> (Frame, Sessi
         let config = TechniqueConfig::from_spec("path:spp=1").expect("spec");
         let mut session = Session::new(cornell(), &config, seed, &device).expect("session");
         if let Some(settings) = denoise {
-            session.enable_denoise(settings).expect("OIDN starts (scripts/setup.sh installs it)");
+            session.set_denoise(Some(settings)).expect("OIDN starts (scripts/setup.sh installs it)");
         }
         let mut last = None;
         for _ in 0..ticks {
@@ -140,7 +140,7 @@ fn auxiliary_pass_stops_when_converged_and_restarts_on_camera_edits() {
         let mut scene = cornell();
         scene.set_resolution(32, 32);
         let mut session = Session::new(scene, &config, 1, &device).expect("session");
-        session.enable_denoise(settings).expect("OIDN");
+        session.set_denoise(Some(settings)).expect("OIDN");
         let target = relume::film::AuxFilm::TARGET_PASSES;
         let rays: Vec<u64> = (0..target + 2).map(|_| session.tick().expect("tick").stats.aux_rays).collect();
         assert!(rays[..target as usize].iter().all(|&r| r >= 32 * 32), "aux rays {rays:?}");
@@ -191,7 +191,7 @@ fn an_unchanged_film_is_not_denoised_again() {
             scene.set_resolution(32, 32);
             let config = TechniqueConfig::from_spec(spec).expect("spec");
             let mut session = Session::new(scene, &config, 1, &device).expect("session");
-            session.enable_denoise(settings).expect("OIDN");
+            session.set_denoise(Some(settings)).expect("OIDN");
             let mut frames: Vec<Frame> = (0..5).map(|_| session.tick().expect("tick")).collect();
             session.queue_edits(vec![common::camera_dolly()]).expect("edit");
             frames.push(session.tick().expect("tick"));

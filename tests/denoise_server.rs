@@ -106,3 +106,51 @@ async fn a_build_without_the_feature_refuses_denoise_naming_it() {
     let e: Value = r.json().await.unwrap();
     assert!(e["detail"].as_str().unwrap().contains("`denoise` cargo feature"), "{e}");
 }
+
+/// Tick `tick`'s EXR frame (`query`: `""` or `"&denoised=false"`).
+#[cfg(feature = "denoise")]
+async fn exr_at(s: &TestServer, id: &str, tick: u64, query: &str) -> Vec<u8> {
+    let r = s.http.get(s.url(&format!("/v1/sessions/{id}/frame.exr?tick={tick}{query}"))).send().await.unwrap();
+    assert_eq!(r.status(), 200, "{query}");
+    r.bytes().await.unwrap().to_vec()
+}
+
+/// `PATCH /v1/sessions/{id}`: the session view it answers.
+#[cfg(feature = "denoise")]
+async fn patch(s: &TestServer, id: &str, body: Value) -> Value {
+    let r = s.http.patch(s.url(&format!("/v1/sessions/{id}"))).json(&body).send().await.unwrap();
+    assert_eq!(r.status(), 200, "{body}");
+    r.json().await.unwrap()
+}
+
+#[cfg(feature = "denoise")]
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn denoising_starts_and_stops_on_a_running_session_without_restarting_its_film() {
+    // Negative control, by hand: an update that ignores `denoise` serves the raw frame as the
+    // default one after the start, and fails.
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(body(None)).await;
+    let twin = s.session(body(None)).await;
+    tick(&s, &id).await;
+    tick(&s, &twin).await;
+    let view = patch(&s, &id, json!({"denoise": {"quality": "fast"}})).await;
+    assert_eq!(view["denoise"], json!({"quality": "fast", "aux": true}));
+    tick(&s, &id).await;
+    tick(&s, &twin).await;
+    let raw = exr_at(&s, &id, 1, "&denoised=false").await;
+    assert_eq!(
+        raw,
+        exr_at(&s, &twin, 1, "").await,
+        "the film restarted or changed: the raw frame differs from the twin's"
+    );
+    assert_ne!(exr_at(&s, &id, 1, "").await, raw, "the session does not denoise after the start");
+    let stats: Value = s.get_json(&format!("/v1/sessions/{id}/stats")).await;
+    assert!(stats["stats"][1]["times"]["denoise_ms"].as_f64().unwrap() > 0.0, "{stats}");
+    let view = patch(&s, &id, json!({"denoise": null})).await;
+    assert!(view["denoise"].is_null(), "{view}");
+    tick(&s, &id).await;
+    tick(&s, &twin).await;
+    let twin_frame = exr_at(&s, &twin, 2, "").await;
+    assert_eq!(exr_at(&s, &id, 2, "").await, twin_frame, "the session still denoises after the stop");
+    s.shutdown().await.unwrap();
+}

@@ -12,15 +12,16 @@
 //! 6. **Resolve** the film into a linear image; encoding happens where the frame is consumed.
 //!    A film unchanged since the last tick ([`Film::version`]) is not resolved again: the last
 //!    image stands, shared (`resolve_reused`).
-//! 7. **Denoise**, when the session asks for it ([`Session::enable_denoise`]): OIDN on the
+//! 7. **Denoise**, when the session asks for it ([`Session::set_denoise`]): OIDN on the
 //!    resolved image, guided by auxiliary images ([`DenoiseStage`]); the raw image stays in the
 //!    frame beside the denoised one. A film unchanged since the last tick ([`Film::version`])
 //!    is not denoised again: the last output stands (`denoise_reused`).
 //!
 //! A session can switch technique between ticks ([`Session::set_technique`]): the scene keeps its
 //! edits and the queue its pending ones, the new technique is built fresh, and the next tick
-//! restarts the film, as a snapshot restored with that technique would. A switch to the
-//! configuration already running changes nothing.
+//! restarts the film, as a snapshot restored with that technique would. Denoising can start,
+//! stop or change quality between ticks too ([`Session::set_denoise`]); the film goes on. A
+//! switch to what is already running changes nothing.
 //!
 //! Nothing traces while Embree commits: the phases run in order inside one session. The engine
 //! never touches tokio or axum; callers run `tick` on a rayon pool made by [`thread_pool`].
@@ -204,10 +205,16 @@ impl Session {
         Ok(true)
     }
 
-    /// Denoises every frame from the next tick on (OIDN's device and filter are made now, once).
-    pub fn enable_denoise(&mut self, settings: DenoiseSettings) -> Result<(), EngineError> {
-        self.denoise = Some(DenoiseStage::new(settings, self.film.width, self.film.height)?);
-        Ok(())
+    /// Denoises every frame from the next tick on with `settings` (OIDN's device and filter are
+    /// made now, once), or stops with `None`; the film goes on accumulating. Returns `false`,
+    /// changing nothing, when these are the settings running. On an error the session keeps its
+    /// stage.
+    pub fn set_denoise(&mut self, settings: Option<DenoiseSettings>) -> Result<bool, EngineError> {
+        if self.denoise.as_ref().map(DenoiseStage::settings) == settings {
+            return Ok(false);
+        }
+        self.denoise = settings.map(|s| DenoiseStage::new(s, self.film.width, self.film.height)).transpose()?;
+        Ok(true)
     }
 
     /// `image` (a frame of this session) denoised once with `settings`, its auxiliary images

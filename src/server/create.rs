@@ -8,7 +8,7 @@
 use super::error::ApiError;
 use super::protocol::{CreateSession, PlayingAnimation, SessionView};
 use super::state::{
-    bundled_scene_file, valid_scene_name, view, AppState, Limits, Reservation, SessionEntry, SessionSettings,
+    bundled_scene_file, valid_scene_name, view, AppState, Limits, Reservation, Running, SessionEntry, SessionSettings,
     MIN_TICK_HZ,
 };
 use super::worker::{SessionHandle, WorkerContext};
@@ -29,7 +29,7 @@ pub(super) struct Plan {
     /// Folder of the scene file, where its animations live (`None` for inline scenes).
     pub scene_dir: Option<PathBuf>,
     pub scene: Scene,
-    pub technique: TechniqueConfig,
+    pub running: Running,
     pub settings: SessionSettings,
     /// A restore: where the snapshot's session stood, and what it was playing.
     pub resume: Option<(Progress, Option<PlayingAnimation>)>,
@@ -58,7 +58,7 @@ fn inline_glb(
 }
 
 /// The denoiser could not start: 422 when this build lacks it, 503 when OIDN is missing.
-fn denoise_error(e: crate::engine::EngineError) -> ApiError {
+pub(super) fn denoise_error(e: crate::engine::EngineError) -> ApiError {
     match e {
         crate::engine::EngineError::Denoise(d @ DenoiseError::NotBuilt) => ApiError::invalid(d.to_string()),
         crate::engine::EngineError::Denoise(d @ DenoiseError::Unavailable(_)) => {
@@ -141,8 +141,9 @@ impl AppState {
         let LoadedScene { scene, warnings, animations } = loaded;
         let (width, height) = (req.width.unwrap_or(scene.camera.width), req.height.unwrap_or(scene.camera.height));
         let technique = req.technique.unwrap_or(TechniqueConfig::Path(PathConfig::default()));
-        let settings = SessionSettings { width, height, seed: req.seed, tick_hz: req.tick_hz, denoise: req.denoise };
-        Ok(Plan { scene_name, scene_dir, scene, technique, settings, resume: None, field: "", warnings, animations })
+        let running = Running { technique, denoise: req.denoise };
+        let settings = SessionSettings { width, height, seed: req.seed, tick_hz: req.tick_hz };
+        Ok(Plan { scene_name, scene_dir, scene, running, settings, resume: None, field: "", warnings, animations })
     }
 
     /// Checks a plan against the limits, builds its session and starts its worker.
@@ -150,15 +151,13 @@ impl AppState {
         self.check_plan(&plan)?;
         plan.scene.set_resolution(plan.settings.width, plan.settings.height);
         let limits = &self.config.limits;
-        let memory_bytes = session_bytes(limits, &plan.technique, &plan.settings, &plan.scene, plan.field)?;
+        let memory_bytes = session_bytes(limits, &plan.running, &plan.settings, &plan.scene, plan.field)?;
         let memory = reservation.memory(memory_bytes, limits.server_memory)?;
         let f = plan.field;
         let settings = plan.settings;
-        let mut session =
-            Session::new(plan.scene, &plan.technique, settings.seed, &self.device).map_err(|e| engine_error(f, e))?;
-        if let Some(denoise) = settings.denoise {
-            session.enable_denoise(denoise).map_err(denoise_error)?;
-        }
+        let mut session = Session::new(plan.scene, &plan.running.technique, settings.seed, &self.device)
+            .map_err(|e| engine_error(f, e))?;
+        session.set_denoise(plan.running.denoise).map_err(denoise_error)?;
         let (progress, playing) = plan.resume.unzip();
         let first_tick = progress.as_ref().map_or(0, |p| p.tick);
         if let Some(progress) = progress {
@@ -215,7 +214,7 @@ impl AppState {
                 limits.max_side, limits.max_pixels
             )));
         }
-        check_technique(limits, &plan.technique, f)?;
+        check_technique(limits, &plan.running.technique, f)?;
         match settings.tick_hz {
             Some(hz) if !(hz.is_finite() && (MIN_TICK_HZ..=limits.max_tick_hz).contains(&hz)) => {
                 Err(ApiError::invalid(format!(
@@ -263,24 +262,24 @@ pub(super) fn check_technique(limits: &Limits, technique: &TechniqueConfig, f: &
     Ok(())
 }
 
-/// A session's estimated resident bytes (technique, film and denoiser) with `technique` and
+/// A session's estimated resident bytes (technique, film and denoiser) running `running` with
 /// `settings` on `scene`, refused with 413 naming the technique's sizing field (or `denoise`)
 /// when over `session_memory`.
 pub(super) fn session_bytes(
     limits: &Limits,
-    technique: &TechniqueConfig,
+    running: &Running,
     settings: &SessionSettings,
     scene: &Scene,
     f: &str,
 ) -> Result<u64, ApiError> {
     let limit = limits.session_memory;
     let pixels = u64::from(settings.width) * u64::from(settings.height);
-    let estimate = technique.resident_estimate(scene, pixels).map_err(|e| match e {
+    let estimate = running.technique.resident_estimate(scene, pixels).map_err(|e| match e {
         TechniqueError::TooLarge { .. } => ApiError::too_large(format!("{f}technique.{e}")),
         other => ApiError::invalid(format!("{f}technique: {other}")),
     })?;
     let film = pixels * crate::film::Film::BYTES_PER_PIXEL;
-    let denoiser = settings.denoise.map_or(0, |d| d.resident_estimate(pixels));
+    let denoiser = running.denoise.map_or(0, |d| d.resident_estimate(pixels));
     let bytes = estimate.bytes.saturating_add(film).saturating_add(denoiser);
     if bytes > limit && denoiser > 0 && estimate.bytes.saturating_add(film) <= limit {
         return Err(ApiError::too_large(format!(

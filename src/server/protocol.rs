@@ -70,13 +70,30 @@ fn default_seed() -> u64 {
     1
 }
 
-/// `PATCH /v1/sessions/{id}`: what to change in a running session.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+/// `PATCH /v1/sessions/{id}`: what to change in a running session; an absent field stays as
+/// it is.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct UpdateSession {
     /// The technique to run from the next tick on, in [`CreateSession::technique`]'s format;
     /// the scene keeps its edits.
-    pub technique: TechniqueConfig,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub technique: Option<TechniqueConfig>,
+    /// `{"quality": …}` denoises every frame from the next tick on, `null` stops.
+    #[serde(default, deserialize_with = "present", skip_serializing_if = "Option::is_none")]
+    pub denoise: Option<Option<DenoiseSettings>>,
+}
+
+impl UpdateSession {
+    /// Nothing to change: neither field was given.
+    pub fn is_empty(&self) -> bool {
+        self.technique.is_none() && self.denoise.is_none()
+    }
+}
+
+/// A field given, even as `null` (`Some(None)`); an absent one is `None` through `default`.
+fn present<'de, D: serde::Deserializer<'de>, T: Deserialize<'de>>(d: D) -> Result<Option<T>, D::Error> {
+    T::deserialize(d).map(Some)
 }
 
 /// The one snapshot format this server writes and reads.

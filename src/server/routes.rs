@@ -174,23 +174,28 @@ pub async fn get_session(State(s): State<Shared>, Path(id): Path<String>) -> Res
     Ok(Json(view(&entry)))
 }
 
-/// Switches the session's technique from its next tick on, keeping its scene as edited and its
-/// queued edits (`PATCH /v1/sessions/{id}`). The new configuration is checked against the limits
-/// as a create's is (spp, photon paths, `--session-memory`), and the session's share of
-/// `--server-memory` is resized to it; a configuration equal to the running one changes nothing.
+/// Switches the session's technique or denoiser from its next tick on, keeping its scene as
+/// edited and its queued edits (`PATCH /v1/sessions/{id}`). What it will run is checked against
+/// the limits as a create is (spp, photon paths, `--session-memory`), and the session's share
+/// of `--server-memory` is resized to it; what equals what is running changes nothing.
 pub async fn update_session(
     State(s): State<Shared>,
     Path(id): Path<String>,
     ApiJson(req): ApiJson<UpdateSession>,
 ) -> Result<Json<SessionView>, ApiError> {
     let entry = s.session(&id)?;
+    if req.is_empty() {
+        return Err(ApiError::invalid("technique, denoise: nothing to change; give either or both"));
+    }
     let limits = s.config.limits.clone();
-    super::create::check_technique(&limits, &req.technique, "")?;
-    let (technique, settings) = (req.technique.clone(), entry.settings.clone());
+    if let Some(technique) = &req.technique {
+        super::create::check_technique(&limits, technique, "")?;
+    }
+    let settings = entry.settings.clone();
     let server_memory = limits.server_memory;
     let bytes: super::worker::SessionBytes =
-        Box::new(move |scene| super::create::session_bytes(&limits, &technique, &settings, scene, ""));
-    entry.handle.set_technique(req.technique, bytes, server_memory).await?;
+        Box::new(move |scene, running| super::create::session_bytes(&limits, running, &settings, scene, ""));
+    entry.handle.update(req, bytes, server_memory).await?;
     Ok(Json(view(&entry)))
 }
 

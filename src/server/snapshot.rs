@@ -16,7 +16,7 @@
 use super::create::{scene_error, Plan};
 use super::error::ApiError;
 use super::protocol::{Snapshot, SnapshotFormat};
-use super::state::{bundled_scene_file, AppState, SessionEntry, SessionSettings};
+use super::state::{bundled_scene_file, AppState, Running, SessionEntry, SessionSettings};
 use super::worker::SnapshotParts;
 use crate::engine::Progress;
 use crate::scene::Scene;
@@ -31,10 +31,10 @@ pub fn snapshot_of(entry: &SessionEntry, parts: SnapshotParts) -> Snapshot {
         session: entry.id.clone(),
         scene_name: entry.scene.clone(),
         scene: parts.scene,
-        technique: parts.technique,
+        technique: parts.running.technique,
         seed: entry.settings.seed,
         tick_hz: entry.settings.tick_hz,
-        denoise: entry.settings.denoise,
+        denoise: parts.running.denoise,
         tick: parts.progress.tick,
         edits_accepted: parts.progress.edits_accepted,
         accumulation_id: parts.progress.accumulation_id,
@@ -97,18 +97,12 @@ impl AppState {
             accumulation_id: snapshot.accumulation_id,
             pending: snapshot.pending_edits,
         };
-        let settings = SessionSettings {
-            width,
-            height,
-            seed: snapshot.seed,
-            tick_hz: snapshot.tick_hz,
-            denoise: snapshot.denoise,
-        };
+        let settings = SessionSettings { width, height, seed: snapshot.seed, tick_hz: snapshot.tick_hz };
         Ok(Plan {
             scene_name,
             scene_dir,
             scene,
-            technique: snapshot.technique,
+            running: Running { technique: snapshot.technique, denoise: snapshot.denoise },
             settings,
             resume: Some((progress, snapshot.animation)),
             field: "snapshot.",

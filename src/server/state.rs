@@ -6,6 +6,7 @@ use super::worker::SessionHandle;
 use crate::embree::Device;
 use crate::film::DenoiseSettings;
 use crate::scene::SceneBudget;
+use crate::technique::TechniqueConfig;
 use axum::http::StatusCode;
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -123,16 +124,21 @@ pub struct Access {
     pub origins: Vec<String>,
 }
 
-/// What a session runs with besides its scene and its technique, fixed for its life: checked
-/// against the limits when it is created, shown in its view and carried by its snapshot. The
-/// technique can change (`PATCH /v1/sessions/{id}`), so its worker publishes the one running
-/// ([`super::worker::SessionHandle::technique`]).
+/// What a session runs with besides its scene, fixed for its life: checked against the limits
+/// when it is created, shown in its view and carried by its snapshot.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SessionSettings {
     pub width: u32,
     pub height: u32,
     pub seed: u64,
     pub tick_hz: Option<f32>,
+}
+
+/// What a session runs that a client can change while it runs (`PATCH /v1/sessions/{id}`): its
+/// worker publishes it ([`super::worker::SessionHandle::running`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Running {
+    pub technique: TechniqueConfig,
     pub denoise: Option<DenoiseSettings>,
 }
 
@@ -443,15 +449,16 @@ pub fn links(id: &str) -> SessionLinks {
 pub fn view(e: &SessionEntry) -> SessionView {
     let last_stats = e.handle.history.lock().ok().and_then(|h| h.back().cloned());
     let failure = e.handle.failure();
+    let running = e.handle.running();
     SessionView {
         id: e.id.clone(),
         scene: e.scene.clone(),
-        technique: e.handle.technique(),
+        technique: running.technique,
         width: e.settings.width,
         height: e.settings.height,
         seed: e.settings.seed,
         tick_hz: e.settings.tick_hz,
-        denoise: e.settings.denoise,
+        denoise: running.denoise,
         ticks: last_stats.as_ref().map_or(e.first_tick, |s| s.tick + 1),
         state: if failure.is_some() { "failed".into() } else { "running".into() },
         failure,

@@ -21,12 +21,11 @@
 //! and stats history stay inspectable until it is deleted.
 use super::error::ApiError;
 use super::metrics::Metrics;
-use super::protocol::{EditsAccepted, PlayingAnimation};
-use super::state::MemoryReservation;
+use super::protocol::{EditsAccepted, PlayingAnimation, UpdateSession};
+use super::state::{MemoryReservation, Running};
 use super::turns::Turns;
 use crate::engine::{Session, TickStats};
 use crate::scene::edits::Edit;
-use crate::technique::TechniqueConfig;
 use axum::http::StatusCode;
 use std::collections::VecDeque;
 use std::panic::AssertUnwindSafe;
@@ -80,11 +79,11 @@ pub enum Command {
     Snapshot {
         reply: oneshot::Sender<Result<SnapshotParts, ApiError>>,
     },
-    /// Runs `technique` from the next tick on (`PATCH /v1/sessions/{id}`), if the session's
+    /// Applies `update` (`PATCH /v1/sessions/{id}`) from the next tick on, if the session's
     /// estimated bytes with it, worked out by `bytes` on the scene as edited, fit its share of
     /// `server_memory`. Answers whether anything changed.
-    Technique {
-        technique: TechniqueConfig,
+    Update {
+        update: UpdateSession,
         bytes: SessionBytes,
         server_memory: u64,
         reply: oneshot::Sender<Result<bool, ApiError>>,
@@ -95,15 +94,15 @@ pub enum Command {
     Panic,
 }
 
-/// A session's estimated resident bytes with a new technique, from its scene (checked against
+/// A session's estimated resident bytes running something else, on its scene (checked against
 /// `--session-memory` by the server, which knows the limits).
-pub type SessionBytes = Box<dyn FnOnce(&crate::scene::Scene) -> Result<u64, ApiError> + Send>;
+pub type SessionBytes = Box<dyn FnOnce(&crate::scene::Scene, &Running) -> Result<u64, ApiError> + Send>;
 
-/// What a snapshot takes from the worker: the scene with its edits applied, the technique
-/// running, the session's progress, and the animation playing with its clock now.
+/// What a snapshot takes from the worker: the scene with its edits applied, what it runs, the
+/// session's progress, and the animation playing with its clock now.
 pub struct SnapshotParts {
     pub scene: crate::scene::SceneDesc,
-    pub technique: TechniqueConfig,
+    pub running: Running,
     pub progress: crate::engine::Progress,
     pub animation: Option<PlayingAnimation>,
 }
@@ -115,8 +114,8 @@ pub struct SessionHandle {
     pub frames: watch::Receiver<Option<Arc<PublishedFrame>>>,
     pub history: Arc<Mutex<VecDeque<TickStats>>>,
     pub failure: Arc<Mutex<Option<String>>>,
-    /// The technique running, which its worker publishes when it switches.
-    technique: Arc<Mutex<TechniqueConfig>>,
+    /// What it runs, which its worker publishes when a client changes it.
+    running: Arc<Mutex<Running>>,
     /// The last encodings of its frames, shared by every client.
     pub encoded: super::encoded::EncodedFrames,
     thread: Mutex<Option<JoinHandle<()>>>,
@@ -157,7 +156,7 @@ struct Worker {
     context: WorkerContext,
     history: Arc<Mutex<VecDeque<TickStats>>>,
     failure: Arc<Mutex<Option<String>>>,
-    technique: Arc<Mutex<TechniqueConfig>>,
+    running: Arc<Mutex<Running>>,
     tick_waiters: TickWaiters,
     /// When the last tick started.
     last_tick: Option<Instant>,
@@ -230,27 +229,33 @@ impl Worker {
         Ok(EditsAccepted { queued, pending: session.pending_edits(), seq })
     }
 
-    /// Switches the technique between ticks: resizes the session's memory share to what
-    /// `bytes` estimates (given back if the build fails), builds the new technique on the
-    /// scene as edited, and publishes it. A configuration equal to the running one changes
-    /// nothing and is not estimated.
-    fn switch(
-        &mut self,
-        technique: TechniqueConfig,
-        bytes: SessionBytes,
-        server_memory: u64,
-    ) -> Result<bool, ApiError> {
+    /// Applies `update` between ticks: resizes the session's memory share to what `bytes`
+    /// estimates, starts or stops the denoiser, builds the new technique on the scene as edited,
+    /// and publishes what the session now runs. On an error everything is as it was (the
+    /// denoiser is made again). What equals what is running changes nothing and is not
+    /// estimated.
+    fn update(&mut self, update: UpdateSession, bytes: SessionBytes, server_memory: u64) -> Result<bool, ApiError> {
         let live = self.live()?;
-        if *live.session.config() == technique {
+        let now = running(&live.session);
+        let next = Running {
+            technique: update.technique.unwrap_or_else(|| now.technique.clone()),
+            denoise: update.denoise.unwrap_or(now.denoise),
+        };
+        if next == now {
             return Ok(false);
         }
-        let before = live.memory.resize(bytes(live.session.scene())?, server_memory)?;
-        if let Err(e) = live.session.set_technique(&technique) {
+        let before = live.memory.resize(bytes(live.session.scene(), &next)?, server_memory)?;
+        if let Err(e) = live.session.set_denoise(next.denoise) {
             live.memory.resize(before, u64::MAX)?;
+            return Err(super::create::denoise_error(e));
+        }
+        if let Err(e) = live.session.set_technique(&next.technique) {
+            live.memory.resize(before, u64::MAX)?;
+            live.session.set_denoise(now.denoise).map_err(super::create::denoise_error)?;
             return Err(super::create::engine_error("", e));
         }
-        if let Ok(mut t) = self.technique.lock() {
-            *t = technique;
+        if let Ok(mut r) = self.running.lock() {
+            *r = next;
         }
         Ok(true)
     }
@@ -315,14 +320,14 @@ impl SessionHandle {
         let (publish, frames) = watch::channel(None);
         let history = Arc::new(Mutex::new(VecDeque::new()));
         let failure = Arc::new(Mutex::new(None));
-        let technique = Arc::new(Mutex::new(session.config().clone()));
+        let running = Arc::new(Mutex::new(running(&session)));
         let tick_waiters = TickWaiters::default();
         let worker = Worker {
             live: Some(Live { session, publish, memory }),
             context,
             history: history.clone(),
             failure: failure.clone(),
-            technique: technique.clone(),
+            running: running.clone(),
             tick_waiters: tick_waiters.clone(),
             last_tick: None,
         };
@@ -335,7 +340,7 @@ impl SessionHandle {
             frames,
             history,
             failure,
-            technique,
+            running,
             encoded: Default::default(),
             thread: Mutex::new(Some(thread)),
         })
@@ -358,24 +363,24 @@ impl SessionHandle {
         self.failure.lock().ok().and_then(|f| f.clone())
     }
 
-    /// The technique the session runs now.
-    pub fn technique(&self) -> TechniqueConfig {
-        match self.technique.lock() {
-            Ok(t) => t.clone(),
+    /// What the session runs now.
+    pub fn running(&self) -> Running {
+        match self.running.lock() {
+            Ok(r) => r.clone(),
             Err(poisoned) => poisoned.into_inner().clone(),
         }
     }
 
-    /// Switches to `technique` from the next tick on, keeping the scene as edited and the
-    /// queued edits (see [`Command::Technique`]). Answers whether anything changed.
-    pub async fn set_technique(
+    /// Applies `update` from the next tick on, keeping the scene as edited and the queued edits
+    /// (see [`Command::Update`]). Answers whether anything changed.
+    pub async fn update(
         &self,
-        technique: TechniqueConfig,
+        update: UpdateSession,
         bytes: SessionBytes,
         server_memory: u64,
     ) -> Result<bool, ApiError> {
         let (reply, answer) = oneshot::channel();
-        self.send(Command::Technique { technique, bytes, server_memory, reply })?;
+        self.send(Command::Update { update, bytes, server_memory, reply })?;
         answer.await.map_err(|_| gone())?
     }
 
@@ -471,6 +476,14 @@ fn run(w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, playing: Op
     }
 }
 
+/// What `session` runs: its technique and its denoiser's settings.
+fn running(session: &Session) -> Running {
+    Running {
+        technique: session.config().clone(),
+        denoise: session.denoise().map(crate::engine::DenoiseStage::settings),
+    }
+}
+
 fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
     panic
         .downcast_ref::<&str>()
@@ -554,7 +567,7 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, resto
             Wake::Command(Command::Snapshot { reply }) => {
                 let parts = w.live().map(|l| SnapshotParts {
                     scene: l.session.scene().desc().clone(),
-                    technique: l.session.config().clone(),
+                    running: running(&l.session),
                     progress: l.session.progress(),
                     animation: playing.as_ref().map(Playing::now),
                 });
@@ -566,8 +579,8 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, resto
                     next_tick = None;
                 }
             }
-            Wake::Command(Command::Technique { technique, bytes, server_memory, reply }) => {
-                let _ = reply.send(w.switch(technique, bytes, server_memory));
+            Wake::Command(Command::Update { update, bytes, server_memory, reply }) => {
+                let _ = reply.send(w.update(update, bytes, server_memory));
             }
             Wake::Command(Command::Scene { reply }) => {
                 let _ = reply.send(w.live().map(|l| l.session.scene().desc().clone()));

@@ -147,7 +147,7 @@ fn render_animation(args: &RenderArgs, anim_path: &std::path::Path) -> Result<()
     let anim = args.target.load_animation(&loaded, anim_path)?;
     let (mut session, pool, _device) = make_session_of(args, loaded.scene, args.spp)?;
     if let Some(settings) = denoise_settings(args.denoise.as_deref())? {
-        session.enable_denoise(settings)?;
+        session.set_denoise(Some(settings))?;
     }
     std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
     let bar = bar(args.frames as u64, "frames", format!("{} x {} spp", args.technique, args.spp))?;

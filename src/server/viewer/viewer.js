@@ -220,12 +220,13 @@ async function start(glb) {
   }
 }
 
-// Runs the picked technique and parameters on this session from its next tick on, keeping its
-// scene as moved (PATCH /v1/sessions/{id}); the plots start over with it.
+// Runs the picked technique, parameters and denoiser on this session from its next tick on,
+// keeping its scene as moved (PATCH /v1/sessions/{id}); the plots start over with it.
 async function switchTechnique() {
   if (!state.id) return;
+  const denoise = $("denoise").value ? { quality: $("denoise").value } : null;
   try {
-    const s = await api(`/v1/sessions/${state.id}`, { method: "PATCH", body: JSON.stringify({ technique: techniqueConfig() }) });
+    const s = await api(`/v1/sessions/${state.id}`, { method: "PATCH", body: JSON.stringify({ technique: techniqueConfig(), denoise }) });
     state.history = [];
     status(`session ${s.id} — now running ${s.technique.id}`);
   } catch (e) {

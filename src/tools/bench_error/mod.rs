@@ -335,7 +335,7 @@ impl Bench<'_> {
         let label = config.label();
         let mut session = Session::new(inputs.scene.clone(), &config.technique, args.seed, self.device)?;
         if let Some(settings) = config.denoise {
-            session.enable_denoise(settings)?;
+            session.set_denoise(Some(settings))?;
         }
         self.pool.install(|| {
             (0..args.frames)
