@@ -195,6 +195,9 @@ impl Session {
     /// Runs `config` from the next tick on, built fresh on the scene as edited; the pending
     /// edits stay queued and that tick restarts the film. Returns `false`, changing nothing,
     /// when `config` is the configuration running. On an error the session keeps its technique.
+    /// The old technique's state is freed here, and every technique's constructor only checks
+    /// its configuration (its state is built on its first tick), so a switch holds at most the
+    /// larger of the two, never both.
     pub fn set_technique(&mut self, config: &TechniqueConfig) -> Result<bool, EngineError> {
         if *config == self.config {
             return Ok(false);
