@@ -81,12 +81,12 @@ pub enum Command {
     },
     /// Applies `update` (`PATCH /v1/sessions/{id}`) from the next tick on, if the session's
     /// estimated bytes with it, worked out by `bytes` on the scene as edited, fit its share of
-    /// `server_memory`. Answers whether anything changed.
+    /// `server_memory`.
     Update {
         update: UpdateSession,
         bytes: SessionBytes,
         server_memory: u64,
-        reply: oneshot::Sender<Result<bool, ApiError>>,
+        reply: oneshot::Sender<Result<(), ApiError>>,
     },
     Shutdown,
     /// Panics inside a tick's turn, as a failing technique would (tests of the failure path).
@@ -234,7 +234,7 @@ impl Worker {
     /// and publishes what the session now runs. On an error everything is as it was (the
     /// denoiser is made again). What equals what is running changes nothing and is not
     /// estimated.
-    fn update(&mut self, update: UpdateSession, bytes: SessionBytes, server_memory: u64) -> Result<bool, ApiError> {
+    fn update(&mut self, update: UpdateSession, bytes: SessionBytes, server_memory: u64) -> Result<(), ApiError> {
         let live = self.live()?;
         let now = running(&live.session);
         let next = Running {
@@ -242,7 +242,7 @@ impl Worker {
             denoise: update.denoise.unwrap_or(now.denoise),
         };
         if next == now {
-            return Ok(false);
+            return Ok(());
         }
         let before = live.memory.resize(bytes(live.session.scene(), &next)?, server_memory)?;
         if let Err(e) = live.session.set_denoise(next.denoise) {
@@ -257,7 +257,7 @@ impl Worker {
         if let Ok(mut r) = self.running.lock() {
             *r = next;
         }
-        Ok(true)
+        Ok(())
     }
 
     /// Runs one tick in this session's turn on the pool, catching panics; on success publishes
@@ -372,13 +372,8 @@ impl SessionHandle {
     }
 
     /// Applies `update` from the next tick on, keeping the scene as edited and the queued edits
-    /// (see [`Command::Update`]). Answers whether anything changed.
-    pub async fn update(
-        &self,
-        update: UpdateSession,
-        bytes: SessionBytes,
-        server_memory: u64,
-    ) -> Result<bool, ApiError> {
+    /// (see [`Command::Update`]).
+    pub async fn update(&self, update: UpdateSession, bytes: SessionBytes, server_memory: u64) -> Result<(), ApiError> {
         let (reply, answer) = oneshot::channel();
         self.send(Command::Update { update, bytes, server_memory, reply })?;
         answer.await.map_err(|_| gone())?
