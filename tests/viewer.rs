@@ -157,20 +157,7 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
             .clone()
     };
     assert_ne!(bunny(&scene), bunny(&bundled), "the drag did not move the bunny");
-    // Switching technique keeps the session and the bunny where the drag left it.
-    let acc = c.execute("return window.relume.accumulation", vec![]).await.unwrap().as_u64();
-    c.execute(
-        "const t = document.getElementById('technique'); t.value = 'instant_cache'; t.dispatchEvent(new Event('change')); \
-         document.getElementById('param-vpls').value = '64'; document.getElementById('switch').click();",
-        vec![],
-    )
-    .await
-    .unwrap();
-    wait_for(&c, "return window.relume.accumulation", |v| v.as_u64() > acc, "a frame after the switch").await;
-    let view = server.get_json(&format!("/v1/sessions/{id}")).await;
-    assert_eq!((&view["technique"]["id"], &view["technique"]["vpls"]), (&json!("instant_cache"), &json!(64)));
-    let switched = server.get_json(&format!("/v1/sessions/{id}/scene")).await;
-    assert_eq!(bunny(&switched), bunny(&scene), "the switch lost the drag");
+    switching_keeps_the_drag(&c, &server, id, &bunny(&scene)).await;
     // The stats panel shows the tick's numbers.
     let stats_rows = c.execute("return document.querySelectorAll('#stats tr').length", vec![]).await.unwrap();
     assert!(stats_rows.as_u64() >= Some(5));
@@ -187,6 +174,25 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
     assert_eq!(server.state.session_count(), 0, "the viewer left its session behind");
     c.close().await.unwrap();
     server.shutdown().await.unwrap();
+}
+
+/// Switches the viewer's session to `instant_cache` with its button: the session keeps its id
+/// and the bunny stays where the drag left it (`dragged`, its translation).
+async fn switching_keeps_the_drag(c: &fantoccini::Client, server: &TestServer, id: &str, dragged: &Value) {
+    let acc = c.execute("return window.relume.accumulation", vec![]).await.unwrap().as_u64();
+    c.execute(
+        "const t = document.getElementById('technique'); t.value = 'instant_cache'; t.dispatchEvent(new Event('change')); \
+         document.getElementById('param-vpls').value = '64'; document.getElementById('switch').click();",
+        vec![],
+    )
+    .await
+    .unwrap();
+    wait_for(c, "return window.relume.accumulation", |v| v.as_u64() > acc, "a frame after the switch").await;
+    let view = server.get_json(&format!("/v1/sessions/{id}")).await;
+    assert_eq!((&view["technique"]["id"], &view["technique"]["vpls"]), (&json!("instant_cache"), &json!(64)));
+    let scene = server.get_json(&format!("/v1/sessions/{id}/scene")).await;
+    let bunny = scene["objects"].as_array().unwrap().iter().find(|o| o["name"] == "bunny-1").expect("bunny-1");
+    assert_eq!(&bunny["transform"]["translation"], dragged, "the switch lost the drag");
 }
 
 /// Starts a session from the page and waits for two frames that arrived after its id did (the

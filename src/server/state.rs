@@ -142,6 +142,16 @@ pub struct Running {
     pub denoise: Option<DenoiseSettings>,
 }
 
+impl Running {
+    /// What `session` runs: its technique and its denoiser's settings.
+    pub fn of(session: &crate::engine::Session) -> Running {
+        Running {
+            technique: session.config().clone(),
+            denoise: session.denoise().map(crate::engine::DenoiseStage::settings),
+        }
+    }
+}
+
 /// What the server remembers about a session besides its worker.
 pub struct SessionEntry {
     pub id: String,

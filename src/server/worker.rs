@@ -236,7 +236,7 @@ impl Worker {
     /// estimated.
     fn update(&mut self, update: UpdateSession, bytes: SessionBytes, server_memory: u64) -> Result<(), ApiError> {
         let live = self.live()?;
-        let now = running(&live.session);
+        let now = Running::of(&live.session);
         let next = Running {
             technique: update.technique.unwrap_or_else(|| now.technique.clone()),
             denoise: update.denoise.unwrap_or(now.denoise),
@@ -320,7 +320,7 @@ impl SessionHandle {
         let (publish, frames) = watch::channel(None);
         let history = Arc::new(Mutex::new(VecDeque::new()));
         let failure = Arc::new(Mutex::new(None));
-        let running = Arc::new(Mutex::new(running(&session)));
+        let running = Arc::new(Mutex::new(Running::of(&session)));
         let tick_waiters = TickWaiters::default();
         let worker = Worker {
             live: Some(Live { session, publish, memory }),
@@ -471,14 +471,6 @@ fn run(w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, playing: Op
     }
 }
 
-/// What `session` runs: its technique and its denoiser's settings.
-fn running(session: &Session) -> Running {
-    Running {
-        technique: session.config().clone(),
-        denoise: session.denoise().map(crate::engine::DenoiseStage::settings),
-    }
-}
-
 fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
     panic
         .downcast_ref::<&str>()
@@ -562,7 +554,7 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, resto
             Wake::Command(Command::Snapshot { reply }) => {
                 let parts = w.live().map(|l| SnapshotParts {
                     scene: l.session.scene().desc().clone(),
-                    running: running(&l.session),
+                    running: Running::of(&l.session),
                     progress: l.session.progress(),
                     animation: playing.as_ref().map(Playing::now),
                 });
