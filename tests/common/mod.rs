@@ -289,3 +289,27 @@ pub fn slab_room_json(
                     "transform": {"translation": lamp}}]
     })
 }
+
+/// A frame against its twin's: the same image bit for bit, and the same stats apart from the
+/// keys `ignored` names (at any depth), which may differ between the two by construction.
+pub fn same_as_twin_frame(after: &Frame, twin: &Frame, ignored: impl Fn(&str) -> bool + Copy) -> Result<(), String> {
+    fn strip(v: &mut serde_json::Value, ignored: impl Fn(&str) -> bool + Copy) {
+        if let serde_json::Value::Object(map) = v {
+            map.retain(|k, _| !ignored(k));
+            map.values_mut().for_each(|v| strip(v, ignored));
+        }
+    }
+    let comparable = |frame: &Frame| {
+        let mut v = serde_json::to_value(&frame.stats).expect("stats JSON");
+        strip(&mut v, ignored);
+        v
+    };
+    if after.image != twin.image {
+        return Err("the image differs from the twin's".into());
+    }
+    let (a, b) = (comparable(after), comparable(twin));
+    if a != b {
+        return Err(format!("stats differ from the twin's:\n{a}\n{b}"));
+    }
+    Ok(())
+}
