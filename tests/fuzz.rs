@@ -198,11 +198,16 @@ fn gltf_documents_are_accepted_or_refused_by_field() {
 fn edits_and_websocket_messages_are_accepted_or_refused_by_field() {
     let mut scene = common::load("bunnies-1.json");
     scene.set_resolution(8, 8);
-    let ws: Vec<Value> =
-        ["ws-client-edits.json", "ws-client-play.json", "ws-client-subscribe.json", "ws-client-tick.json"]
-            .iter()
-            .map(|n| examples(n))
-            .collect();
+    let ws: Vec<Value> = [
+        "ws-client-edits.json",
+        "ws-client-play.json",
+        "ws-client-subscribe.json",
+        "ws-client-tick.json",
+        "ws-client-update.json",
+    ]
+    .iter()
+    .map(|n| examples(n))
+    .collect();
     let mut seeds = vec![examples("edits.request.json")];
     seeds.extend(ws);
     runner(400)

@@ -34,10 +34,12 @@ fn every_golden_example_round_trips() {
         "ws-client-subscribe.json",
         "ws-client-play.json",
         "ws-client-pause.json",
+        "ws-client-update.json",
     ] {
         n += round_trip::<ClientMessage>(f);
     }
-    for f in ["ws-server-stats.json", "ws-server-edits-accepted.json", "ws-server-error.json"] {
+    for f in ["ws-server-stats.json", "ws-server-edits-accepted.json", "ws-server-error.json", "ws-server-updated.json"]
+    {
         n += round_trip::<ServerMessage>(f);
     }
     let on_disk = std::fs::read_dir(Path::new(env!("CARGO_MANIFEST_DIR")).join("proto/examples")).unwrap().count();

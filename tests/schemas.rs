@@ -62,12 +62,13 @@ fn websocket_examples_match_the_ws_schema() {
             n += 1;
         }
     }
-    assert_eq!(n, 8);
+    assert_eq!(n, 10);
     // Edits inside the HTTP example follow the same edit schema.
     let edits = read(&dir.join("edits.request.json"));
     let msg = serde_json::json!({"type": "edits", "edits": edits["edits"]});
     assert!(errors(&ws, &msg).is_empty(), "{:?}", errors(&ws, &msg));
     assert!(!errors(&ws, &serde_json::json!({"type": "subscribe", "every": 0})).is_empty());
+    assert!(!errors(&ws, &serde_json::json!({"type": "update"})).is_empty(), "an update must change something");
 }
 
 #[test]

@@ -13,6 +13,14 @@ async fn connect(s: &TestServer, id: &str) -> Socket {
     common::ws::open(&s.ws_url(&format!("/v1/sessions/{id}/ws"))).await
 }
 
+/// Asks for a tick and returns its stats (the socket subscribes to stats and no frames).
+async fn ticked(ws: &mut Socket) -> Value {
+    send(ws, json!({"type": "tick"})).await;
+    let st = next_text(ws).await;
+    assert_eq!(st["type"], "stats", "{st}");
+    st["stats"].clone()
+}
+
 fn bunny_at(x: f32) -> Value {
     json!({"target": "object", "name": "bunny-1", "transform": {"translation": [x, 0, 280], "scale": [140, 140, 140]}})
 }
@@ -70,6 +78,10 @@ async fn bad_messages_get_errors_and_the_socket_stays_open() {
         (json!({"type": "dance"}), "unknown variant"),
         (json!({"type": "edits", "edits": [{"target": "object", "name": "floor", "transform": {}}]}), "static"),
         (json!({"type": "subscribe", "every": 0}), "every"),
+        (
+            json!({"type": "edits", "edits": [{"target": "object", "name": "bunny-1", "transform": {"scale": "big"}}]}),
+            "edits[0]: invalid type",
+        ),
         (json!({"type": "play", "anim": "../../etc/passwd"}), "not an animation name"),
         (json!({"type": "play", "anim": "walker"}), "unknown object"),
         (json!({"type": "play", "anim": "bunnies-1", "speed": -1}), "speed"),
@@ -84,6 +96,57 @@ async fn bad_messages_get_errors_and_the_socket_stays_open() {
     // Still open and working.
     send(&mut ws, json!({"type": "tick"})).await;
     assert_eq!(next_text(&mut ws).await["type"], "stats");
+    s.shutdown().await.unwrap();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_update_switches_the_technique_and_a_refused_one_changes_nothing() {
+    // `update` is PATCH /v1/sessions/{id} on the socket: the switch reaches the next tick's
+    // stats (a restarted film, the scene as edited) and the session view; bad updates are
+    // answered by errors naming the field and leave the technique as it was. Negative control,
+    // by hand: a handler that answers `updated` without applying the update fails the check of
+    // the next tick's technique.
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s
+        .session(json!({"scene": "bunnies-1", "width": 24, "height": 24, "technique": {"id": "path", "spp": 1}}))
+        .await;
+    let mut ws = connect(&s, &id).await;
+    send(&mut ws, json!({"type": "subscribe", "frames": "none", "stats": true})).await;
+    send(&mut ws, json!({"type": "edits", "edits": [bunny_at(300.0)]})).await;
+    assert_eq!(next_text(&mut ws).await["type"], "edits_accepted");
+    send(&mut ws, json!({"type": "tick"})).await;
+    let before = next_text(&mut ws).await["stats"].clone();
+    assert_eq!(before["technique"], "path");
+    send(&mut ws, json!({"type": "update", "technique": {"id": "instant_cache", "vpls": 32}})).await;
+    let updated = next_text(&mut ws).await;
+    assert_eq!(
+        (&updated["type"], &updated["technique"]["id"]),
+        (&json!("updated"), &json!("instant_cache")),
+        "{updated}"
+    );
+    assert_eq!((&updated["technique"]["vpls"], &updated["denoise"]), (&json!(32), &Value::Null), "{updated}");
+    let view: Value = s.http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap().json().await.unwrap();
+    assert_eq!(view["technique"], updated["technique"], "the view does not show the switch");
+    let after = ticked(&mut ws).await;
+    assert_eq!(after["technique"], "instant_cache");
+    assert_eq!(after["accumulation_id"].as_u64(), before["accumulation_id"].as_u64().map(|a| a + 1), "{after}");
+    let scene: Value =
+        s.http.get(s.url(&format!("/v1/sessions/{id}/scene"))).send().await.unwrap().json().await.unwrap();
+    let bunny = scene["objects"].as_array().unwrap().iter().find(|o| o["name"] == "bunny-1").expect("bunny-1");
+    assert_eq!(bunny["transform"]["translation"], json!([300.0, 0.0, 280.0]), "the edit was lost");
+    for (bad, words) in [
+        (json!({"type": "update"}), "nothing to change"),
+        (json!({"type": "update", "technique": {"id": "path", "spp": 100000000}}), "technique.spp"),
+        (json!({"type": "update", "technique": {"id": "bogus"}}), "bogus"),
+        (json!({"type": "update", "denoise": {"quality": "best"}}), "denoise.quality"),
+        (json!({"type": "update", "colour": "red"}), "colour"),
+    ] {
+        send(&mut ws, bad.clone()).await;
+        let e = next_text(&mut ws).await;
+        assert_eq!(e["type"], "error", "{bad}: {e}");
+        assert!(e["detail"].as_str().unwrap().contains(words), "{bad}: {e}");
+    }
+    assert_eq!(ticked(&mut ws).await["technique"], "instant_cache", "a refused update changed the technique");
     s.shutdown().await.unwrap();
 }
 

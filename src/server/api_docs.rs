@@ -36,9 +36,11 @@ pub const FILES: &[(&str, &str)] = proto_files![
     "examples/ws-client-play.json",
     "examples/ws-client-subscribe.json",
     "examples/ws-client-tick.json",
+    "examples/ws-client-update.json",
     "examples/ws-server-edits-accepted.json",
     "examples/ws-server-error.json",
     "examples/ws-server-stats.json",
+    "examples/ws-server-updated.json",
 ];
 
 /// `GET /api/{file}`.

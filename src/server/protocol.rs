@@ -282,6 +282,9 @@ pub enum ClientMessage {
         speed: f32,
     },
     Pause,
+    /// Switches the technique or the denoiser as `PATCH /v1/sessions/{id}` does (its body, with
+    /// the `type`); answered by `updated` or `error`.
+    Update(UpdateSession),
 }
 
 fn default_frames() -> FrameFormat {
@@ -301,9 +304,24 @@ fn unit_speed() -> f32 {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "type", rename_all = "snake_case")]
 pub enum ServerMessage {
-    Stats { stats: Box<TickStats>, frames_dropped: u64 },
-    EditsAccepted { queued: usize, pending: usize, seq: u64 },
-    Error { error: String, detail: String },
+    Stats {
+        stats: Box<TickStats>,
+        frames_dropped: u64,
+    },
+    EditsAccepted {
+        queued: usize,
+        pending: usize,
+        seq: u64,
+    },
+    /// An `update` was applied: what the session runs from its next tick on.
+    Updated {
+        technique: TechniqueConfig,
+        denoise: Option<DenoiseSettings>,
+    },
+    Error {
+        error: String,
+        detail: String,
+    },
 }
 
 /// The header in front of every binary frame message: 32 bytes, little-endian.

@@ -184,6 +184,13 @@ pub async fn update_session(
     ApiJson(req): ApiJson<UpdateSession>,
 ) -> Result<Json<SessionView>, ApiError> {
     let entry = s.session(&id)?;
+    update(&s, &entry, req).await?;
+    Ok(Json(view(&entry)))
+}
+
+/// Applies `req` to the session of `entry` between its ticks, checked against `s`'s limits: the
+/// work of `PATCH /v1/sessions/{id}` and of the WebSocket's `update`.
+pub async fn update(s: &Shared, entry: &SessionEntry, req: UpdateSession) -> Result<(), ApiError> {
     if req.is_empty() {
         return Err(ApiError::invalid("technique, denoise: nothing to change; give either or both"));
     }
@@ -195,8 +202,7 @@ pub async fn update_session(
     let server_memory = limits.server_memory;
     let bytes: super::worker::SessionBytes =
         Box::new(move |scene, running| super::create::session_bytes(&limits, running, &settings, scene, ""));
-    entry.handle.update(req, bytes, server_memory).await?;
-    Ok(Json(view(&entry)))
+    entry.handle.update(req, bytes, server_memory).await
 }
 
 pub async fn delete_session(State(s): State<Shared>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {

@@ -1,8 +1,9 @@
 //! The WebSocket at `/v1/sessions/{id}/ws`.
 //!
 //! Client → server: JSON text [`ClientMessage`]s (`edits`, `tick`, `subscribe`, `play`,
-//! `pause`). Server → client: JSON text [`ServerMessage`]s (stats, edit acknowledgements,
-//! errors) and binary frames: a 32-byte [`FrameHeader`] followed by the encoded image.
+//! `pause`, `update`). Server → client: JSON text [`ServerMessage`]s (stats, edit
+//! acknowledgements, what an update left running, errors) and binary frames: a 32-byte
+//! [`FrameHeader`] followed by the encoded image.
 //!
 //! Watch semantics: a consumer slower than the ticks receives only the newest frame; the frames
 //! it never saw are counted (`frames_dropped` in each stats message and in `/metrics`). Edits are
@@ -10,8 +11,10 @@
 //! A bad message gets an `error` reply and the connection stays open.
 use super::encoded::EncodingKey;
 use super::error::ApiError;
-use super::protocol::{ClientMessage, FrameFormat, FrameHeader, PlayingAnimation, ServerMessage};
-use super::routes::{parse_body, Shared};
+use super::protocol::{
+    ClientMessage, EditBatch, FrameFormat, FrameHeader, PlayingAnimation, ServerMessage, UpdateSession,
+};
+use super::routes::{parse_body, update, Shared};
 use super::state::{valid_name, SessionEntry};
 use super::worker::PublishedFrame;
 use crate::film::ImageFormat;
@@ -221,7 +224,7 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
 
 /// Handles one client message; returns the reply to send, if any.
 async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, bytes: &[u8]) -> Option<Message> {
-    let message: ClientMessage = match parse_body(bytes) {
+    let message = match parse_message(bytes) {
         Ok(m) => m,
         Err(e) => return Some(error_message(&e)),
     };
@@ -253,11 +256,32 @@ async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, by
             }
             ClientMessage::Play { anim, speed } => play(entry, &anim, speed).await.map(|_| None),
             ClientMessage::Pause => entry.handle.pause().map(|_| None),
+            ClientMessage::Update(req) => update(state, entry, req).await.map(|()| {
+                let running = entry.handle.running();
+                Some(ServerMessage::Updated { technique: running.technique, denoise: running.denoise })
+            }),
         };
     match outcome {
         Ok(reply) => reply.map(|m| text(&m)),
         Err(e) => Some(error_message(&e)),
     }
+}
+
+/// Parses a client message. Serde reads a message tagged by `type` through a buffer, which
+/// loses the path to a bad field; so a message that fails is read again as its variant's body
+/// alone, whose error names the field (`edits[0]`, `denoise.quality`).
+fn parse_message(bytes: &[u8]) -> Result<ClientMessage, ApiError> {
+    parse_body(bytes).map_err(|e| {
+        let Ok(serde_json::Value::Object(mut body)) = serde_json::from_slice(bytes) else { return e };
+        let kind = body.remove("type");
+        let body = serde_json::Value::Object(body).to_string();
+        let named = match kind.as_ref().and_then(serde_json::Value::as_str) {
+            Some("update") => parse_body::<UpdateSession>(body.as_bytes()).err(),
+            Some("edits") => parse_body::<EditBatch>(body.as_bytes()).err(),
+            _ => None,
+        };
+        named.unwrap_or(e)
+    })
 }
 
 /// An animation's playback speed must lie in (0, 100]; `field` names it in the error.

@@ -211,6 +211,8 @@ impl Ledger {
                         self.report.errors.push(format!("{error}: {detail}"));
                         self.in_flight = None;
                     }
+                    // This client never sends `update`, so an answer to one is the server's error.
+                    Ok(ServerMessage::Updated { .. }) => self.report.errors.push("an update nobody sent".into()),
                     Err(e) => self.report.errors.push(format!("unreadable message: {e}")),
                 }
             }
