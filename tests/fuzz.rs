@@ -1,5 +1,6 @@
 //! Fuzzing on the stable toolchain: property tests (proptest) that feed mutated documents to
-//! every parser and validator that takes outside input, and mutated requests to a real server.
+//! every parser and validator that takes outside input, and mutated requests and WebSocket
+//! messages to a real server.
 //!
 //! Each case takes a valid seed document (a bundled scene, the protocol examples, a spec of
 //! every technique), replaces, removes or retypes one value at a random place in it, and
@@ -198,18 +199,8 @@ fn gltf_documents_are_accepted_or_refused_by_field() {
 fn edits_and_websocket_messages_are_accepted_or_refused_by_field() {
     let mut scene = common::load("bunnies-1.json");
     scene.set_resolution(8, 8);
-    let ws: Vec<Value> = [
-        "ws-client-edits.json",
-        "ws-client-play.json",
-        "ws-client-subscribe.json",
-        "ws-client-tick.json",
-        "ws-client-update.json",
-    ]
-    .iter()
-    .map(|n| examples(n))
-    .collect();
     let mut seeds = vec![examples("edits.request.json")];
-    seeds.extend(ws);
+    seeds.extend(WS_SEEDS.iter().map(|n| examples(n)));
     runner(400)
         .run(&mutated(seeds), |doc| {
             if let Some(edits) = doc.get("edits") {
@@ -323,5 +314,81 @@ fn a_real_server_answers_every_mutated_request_below_500() {
         .unwrap();
     let healthy = rt.block_on(async { s.http.get(s.url("/healthz")).send().await.map(|r| r.status().as_u16()) });
     assert_eq!(healthy.ok(), Some(200), "the server stopped serving");
+    rt.block_on(s.shutdown()).unwrap();
+}
+
+/// The WebSocket's golden client messages, the seeds of its fuzzing.
+const WS_SEEDS: [&str; 6] = [
+    "ws-client-edits.json",
+    "ws-client-play.json",
+    "ws-client-pause.json",
+    "ws-client-subscribe.json",
+    "ws-client-tick.json",
+    "ws-client-update.json",
+];
+
+#[test]
+fn a_real_server_websocket_answers_every_mutated_message_and_stays_open() {
+    // Mutated client messages on one socket of a live session. Each is answered, if at all,
+    // by messages of the protocol and never by an `internal` error, and the socket stays open:
+    // after every message a sentinel (a `play` of an animation no mutation can name, always
+    // refused by name) must come back. The session keeps ticking and the server keeps serving.
+    // Negative control, by hand: a handler that answers `update` with an internal error fails.
+    use common::ws::{next, send};
+    use relume::server::protocol::ServerMessage;
+    use tokio_tungstenite::tungstenite::Message;
+    let limits = Limits {
+        max_photon_paths: 20_000,
+        max_pixels: 64 * 64,
+        max_side: 64,
+        max_spp_per_tick: 4,
+        session_memory: 64 << 20,
+        ..Limits::default()
+    };
+    let rt = tokio::runtime::Runtime::new().expect("runtime");
+    let s = rt.block_on(TestServer::start(None, limits));
+    let id = rt.block_on(s.session(json!({"scene": "bunnies-1", "width": 16, "height": 16})));
+    let sentinel = json!({"type": "play", "anim": "sentinel-42"});
+    let ws = std::cell::RefCell::new(rt.block_on(async {
+        let mut ws = common::ws::open(&s.ws_url(&format!("/v1/sessions/{id}/ws"))).await;
+        send(&mut ws, json!({"type": "subscribe", "frames": "none", "stats": false})).await;
+        ws
+    }));
+    // Everything the server sends until the sentinel's refusal; fails on a close or an
+    // `internal` error.
+    let exchange = |message: Value| -> Result<Vec<ServerMessage>, TestCaseError> {
+        rt.block_on(async {
+            let mut ws = ws.borrow_mut();
+            send(&mut ws, message.clone()).await;
+            send(&mut ws, sentinel.clone()).await;
+            let mut answers = Vec::new();
+            loop {
+                let text = match next(&mut ws).await {
+                    Message::Text(t) => t,
+                    Message::Binary(_) => continue,
+                    other => return Err(TestCaseError::fail(format!("{message}: the socket answered {other:?}"))),
+                };
+                let answer: ServerMessage = serde_json::from_str(&text)
+                    .map_err(|e| TestCaseError::fail(format!("{message}: {text} is not a server message: {e}")))?;
+                if let ServerMessage::Error { error, detail } = &answer {
+                    prop_assert_ne!(error.as_str(), "internal", "{}: {}", message, detail);
+                    if detail.contains("sentinel-42") {
+                        return Ok(answers);
+                    }
+                }
+                answers.push(answer);
+            }
+        })
+    };
+    let valid = exchange(examples("ws-client-update.json")).expect("the golden update");
+    assert!(matches!(valid.as_slice(), [ServerMessage::Updated { .. }]), "{valid:?}");
+    let seeds = WS_SEEDS.iter().map(|n| examples(n)).collect();
+    runner(60).run(&mutated(seeds), |message| exchange(message).map(|_| ())).unwrap();
+    let healthy = rt.block_on(async {
+        let tick = s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.map(|r| r.status().as_u16());
+        let health = s.http.get(s.url("/healthz")).send().await.map(|r| r.status().as_u16());
+        (tick.ok(), health.ok())
+    });
+    assert_eq!(healthy, (Some(200), Some(200)), "the session or the server stopped");
     rt.block_on(s.shutdown()).unwrap();
 }
