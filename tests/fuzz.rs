@@ -349,7 +349,7 @@ fn a_real_server_websocket_answers_every_mutated_message_and_stays_open() {
     let s = rt.block_on(TestServer::start(None, limits));
     let id = rt.block_on(s.session(json!({"scene": "bunnies-1", "width": 16, "height": 16})));
     let sentinel = json!({"type": "play", "anim": "sentinel-42"});
-    let ws = std::cell::RefCell::new(rt.block_on(async {
+    let ws = tokio::sync::Mutex::new(rt.block_on(async {
         let mut ws = common::ws::open(&s.ws_url(&format!("/v1/sessions/{id}/ws"))).await;
         send(&mut ws, json!({"type": "subscribe", "frames": "none", "stats": false})).await;
         ws
@@ -358,7 +358,7 @@ fn a_real_server_websocket_answers_every_mutated_message_and_stays_open() {
     // `internal` error.
     let exchange = |message: Value| -> Result<Vec<ServerMessage>, TestCaseError> {
         rt.block_on(async {
-            let mut ws = ws.borrow_mut();
+            let mut ws = ws.lock().await;
             send(&mut ws, message.clone()).await;
             send(&mut ws, sentinel.clone()).await;
             let mut answers = Vec::new();
