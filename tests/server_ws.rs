@@ -114,8 +114,7 @@ async fn an_update_switches_the_technique_and_a_refused_one_changes_nothing() {
     send(&mut ws, json!({"type": "subscribe", "frames": "none", "stats": true})).await;
     send(&mut ws, json!({"type": "edits", "edits": [bunny_at(300.0)]})).await;
     assert_eq!(next_text(&mut ws).await["type"], "edits_accepted");
-    send(&mut ws, json!({"type": "tick"})).await;
-    let before = next_text(&mut ws).await["stats"].clone();
+    let before = ticked(&mut ws).await;
     assert_eq!(before["technique"], "path");
     send(&mut ws, json!({"type": "update", "technique": {"id": "instant_cache", "vpls": 32}})).await;
     let updated = next_text(&mut ws).await;
