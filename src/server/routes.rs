@@ -5,7 +5,7 @@ use super::protocol::{
     CreateSession, EditBatch, SceneList, SessionList, SessionView, StatsHistory, TechniqueEntry, TechniqueList,
     TickDone, UpdateSession,
 };
-use super::state::{view, AppState, SessionEntry};
+use super::state::{view, AppState, Running, SessionEntry};
 use super::worker::PublishedFrame;
 use crate::film::{check_exposure, ImageFormat};
 use axum::body::{Body, Bytes};
@@ -189,8 +189,9 @@ pub async fn update_session(
 }
 
 /// Applies `req` to the session of `entry` between its ticks, checked against `s`'s limits: the
-/// work of `PATCH /v1/sessions/{id}` and of the WebSocket's `update`.
-pub async fn update(s: &Shared, entry: &SessionEntry, req: UpdateSession) -> Result<(), ApiError> {
+/// work of `PATCH /v1/sessions/{id}` and of the WebSocket's `update`. Returns what the session
+/// runs from its next tick on.
+pub async fn update(s: &Shared, entry: &SessionEntry, req: UpdateSession) -> Result<Running, ApiError> {
     if req.is_empty() {
         return Err(ApiError::invalid("technique, denoise: nothing to change; give either or both"));
     }

@@ -86,7 +86,7 @@ pub enum Command {
         update: UpdateSession,
         bytes: SessionBytes,
         server_memory: u64,
-        reply: oneshot::Sender<Result<(), ApiError>>,
+        reply: oneshot::Sender<Result<Running, ApiError>>,
     },
     Shutdown,
     /// Panics inside a tick's turn, as a failing technique would (tests of the failure path).
@@ -231,10 +231,10 @@ impl Worker {
 
     /// Applies `update` between ticks: resizes the session's memory share to what `bytes`
     /// estimates, starts or stops the denoiser, builds the new technique on the scene as edited,
-    /// and publishes what the session now runs. On an error everything is as it was (the
-    /// denoiser is made again). What equals what is running changes nothing and is not
-    /// estimated.
-    fn update(&mut self, update: UpdateSession, bytes: SessionBytes, server_memory: u64) -> Result<(), ApiError> {
+    /// and publishes what the session now runs, which it returns. On an error everything is as
+    /// it was (the denoiser is made again). What equals what is running changes nothing and is
+    /// not estimated.
+    fn update(&mut self, update: UpdateSession, bytes: SessionBytes, server_memory: u64) -> Result<Running, ApiError> {
         let live = self.live()?;
         let now = Running::of(&live.session);
         let next = Running {
@@ -242,7 +242,7 @@ impl Worker {
             denoise: update.denoise.unwrap_or(now.denoise),
         };
         if next == now {
-            return Ok(());
+            return Ok(now);
         }
         let before = live.memory.resize(bytes(live.session.scene(), &next)?, server_memory)?;
         if let Err(e) = live.session.set_denoise(next.denoise) {
@@ -255,9 +255,9 @@ impl Worker {
             return Err(super::create::engine_error("", e));
         }
         if let Ok(mut r) = self.running.lock() {
-            *r = next;
+            *r = next.clone();
         }
-        Ok(())
+        Ok(next)
     }
 
     /// Runs one tick in this session's turn on the pool, catching panics; on success publishes
@@ -372,8 +372,13 @@ impl SessionHandle {
     }
 
     /// Applies `update` from the next tick on, keeping the scene as edited and the queued edits
-    /// (see [`Command::Update`]).
-    pub async fn update(&self, update: UpdateSession, bytes: SessionBytes, server_memory: u64) -> Result<(), ApiError> {
+    /// (see [`Command::Update`]); returns what the session then runs.
+    pub async fn update(
+        &self,
+        update: UpdateSession,
+        bytes: SessionBytes,
+        server_memory: u64,
+    ) -> Result<Running, ApiError> {
         let (reply, answer) = oneshot::channel();
         self.send(Command::Update { update, bytes, server_memory, reply })?;
         answer.await.map_err(|_| gone())?

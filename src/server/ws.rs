@@ -256,10 +256,9 @@ async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, by
             }
             ClientMessage::Play { anim, speed } => play(entry, &anim, speed).await.map(|_| None),
             ClientMessage::Pause => entry.handle.pause().map(|_| None),
-            ClientMessage::Update(req) => update(state, entry, req).await.map(|()| {
-                let running = entry.handle.running();
-                Some(ServerMessage::Updated { technique: running.technique, denoise: running.denoise })
-            }),
+            ClientMessage::Update(req) => update(state, entry, req)
+                .await
+                .map(|running| Some(ServerMessage::Updated { technique: running.technique, denoise: running.denoise })),
         };
     match outcome {
         Ok(reply) => reply.map(|m| text(&m)),
