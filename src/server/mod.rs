@@ -5,7 +5,7 @@
 //! every session. `main` only parses flags and calls these.
 //!
 //! Concurrency: handlers are async and never trace rays; each session's CPU work runs on its own
-//! worker thread (`worker.rs`) inside the shared rayon pool. No lock is held across `.await`.
+//! worker thread (`worker/`) inside the shared rayon pool. No lock is held across `.await`.
 //! Errors: every client fault is a 4xx JSON `{error, detail}`; internal faults are 500s with a
 //! log line. When a token is configured, every `/v1` route requires `Authorization: Bearer`.
 mod api_docs;

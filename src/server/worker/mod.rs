@@ -1,15 +1,16 @@
 //! One session's worker: a dedicated thread that owns the [`Session`] and runs its ticks on the
 //! shared rayon pool, so no CPU work runs on the async runtime.
 //!
-//! Commands arrive over a bounded channel ([`COMMAND_QUEUE`] deep: a client that sends faster
-//! than the session works gets 429 `session_busy` instead of growing the queue); replies go
-//! back through oneshot channels. Ticks are client-driven (`Tick`), or server-driven at
-//! `tick_hz` and while an animation plays. A tick request that finds a tick already queued and
-//! not yet started joins it instead of queueing another, so a session has at most one tick
-//! waiting however many clients ask, and every one of them gets that tick's stats. Each
-//! tick's frame is published through a `watch` channel (newest frame wins) and its stats are
-//! kept in a bounded history. A panic inside a tick marks the session failed with the panic's
-//! message; the process and the other sessions carry on.
+//! Commands arrive from the server's [`SessionHandle`] (`handle.rs`) over a bounded channel
+//! ([`COMMAND_QUEUE`] deep: a client that sends faster than the session works gets 429
+//! `session_busy` instead of growing the queue); replies go back through oneshot channels.
+//! Ticks are client-driven (`Tick`), or server-driven at `tick_hz` and while an animation
+//! plays. A tick request that finds a tick already queued and not yet started joins it instead
+//! of queueing another, so a session has at most one tick waiting however many clients ask,
+//! and every one of them gets that tick's stats. Each tick's frame is published through a
+//! `watch` channel (newest frame wins) and its stats are kept in a bounded history. A panic
+//! inside a tick marks the session failed with the panic's message; the process and the other
+//! sessions carry on.
 //!
 //! Fairness: every tick runs in a turn on the shared pool ([`Turns`], round-robin across
 //! sessions), and client-driven ticks of one session run at most `max_tick_hz` times a second
@@ -31,9 +32,11 @@ use std::collections::VecDeque;
 use std::panic::AssertUnwindSafe;
 use std::sync::mpsc::{self, RecvTimeoutError};
 use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 use tokio::sync::{oneshot, watch};
+
+mod handle;
+pub use handle::SessionHandle;
 
 /// Commands a session's queue holds before new ones are refused with 429.
 pub const COMMAND_QUEUE: usize = 64;
@@ -105,20 +108,6 @@ pub struct SnapshotParts {
     pub running: Running,
     pub progress: crate::engine::Progress,
     pub animation: Option<PlayingAnimation>,
-}
-
-/// The handle the server keeps for a session.
-pub struct SessionHandle {
-    commands: Mutex<mpsc::SyncSender<Command>>,
-    tick_waiters: TickWaiters,
-    pub frames: watch::Receiver<Option<Arc<PublishedFrame>>>,
-    pub history: Arc<Mutex<VecDeque<TickStats>>>,
-    pub failure: Arc<Mutex<Option<String>>>,
-    /// What it runs, which its worker publishes when a client changes it.
-    running: Arc<Mutex<Running>>,
-    /// The last encodings of its frames, shared by every client.
-    pub encoded: super::encoded::EncodedFrames,
-    thread: Mutex<Option<JoinHandle<()>>>,
 }
 
 /// 409: the session failed earlier.
@@ -208,17 +197,13 @@ impl Worker {
     }
 
     fn failure(&self) -> Option<String> {
-        self.failure.lock().ok().and_then(|f| f.clone())
+        read_failure(&self.failure)
     }
 
     /// Marks the session failed and drops what it holds: technique, film, frame publisher (its
     /// subscribers see the channel close) and its memory reservation.
     fn fail(&mut self, reason: String) {
-        tracing::error!(target: "relume::server", "session failed: {reason}");
-        self.context.metrics.sessions_failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        if let Ok(mut f) = self.failure.lock() {
-            *f = Some(reason);
-        }
+        record_failure(&self.context.metrics, &self.failure, reason);
         self.live = None;
     }
 
@@ -306,160 +291,6 @@ impl Worker {
     }
 }
 
-impl SessionHandle {
-    /// Starts the worker thread for `session`, which holds `memory` of the server's budget.
-    pub fn spawn(
-        id: &str,
-        session: Session,
-        memory: MemoryReservation,
-        tick_hz: Option<f32>,
-        playing: Option<PlayingAnimation>,
-        context: WorkerContext,
-    ) -> std::io::Result<SessionHandle> {
-        let (tx, rx) = mpsc::sync_channel(COMMAND_QUEUE);
-        let (publish, frames) = watch::channel(None);
-        let history = Arc::new(Mutex::new(VecDeque::new()));
-        let failure = Arc::new(Mutex::new(None));
-        let running = Arc::new(Mutex::new(Running::of(&session)));
-        let tick_waiters = TickWaiters::default();
-        let worker = Worker {
-            live: Some(Live { session, publish, memory }),
-            context,
-            history: history.clone(),
-            failure: failure.clone(),
-            running: running.clone(),
-            tick_waiters: tick_waiters.clone(),
-            last_tick: None,
-        };
-        let thread = std::thread::Builder::new()
-            .name(format!("session-{id}"))
-            .spawn(move || run(worker, rx, tick_hz, playing))?;
-        Ok(SessionHandle {
-            commands: Mutex::new(tx),
-            tick_waiters,
-            frames,
-            history,
-            failure,
-            running,
-            encoded: Default::default(),
-            thread: Mutex::new(Some(thread)),
-        })
-    }
-
-    /// Queues a command, or refuses it with 429 when the queue is full.
-    fn send(&self, c: Command) -> Result<(), ApiError> {
-        match self.commands.lock().map_err(|_| gone())?.try_send(c) {
-            Ok(()) => Ok(()),
-            Err(mpsc::TrySendError::Full(_)) => Err(ApiError::new(
-                StatusCode::TOO_MANY_REQUESTS,
-                "session_busy",
-                format!("the session has {COMMAND_QUEUE} commands waiting; wait for their answers before sending more"),
-            )),
-            Err(mpsc::TrySendError::Disconnected(_)) => Err(gone()),
-        }
-    }
-
-    pub fn failure(&self) -> Option<String> {
-        self.failure.lock().ok().and_then(|f| f.clone())
-    }
-
-    /// What the session runs now.
-    pub fn running(&self) -> Running {
-        match self.running.lock() {
-            Ok(r) => r.clone(),
-            Err(poisoned) => poisoned.into_inner().clone(),
-        }
-    }
-
-    /// Applies `update` from the next tick on, keeping the scene as edited and the queued edits
-    /// (see [`Command::Update`]); returns what the session then runs.
-    pub async fn update(
-        &self,
-        update: UpdateSession,
-        bytes: SessionBytes,
-        server_memory: u64,
-    ) -> Result<Running, ApiError> {
-        let (reply, answer) = oneshot::channel();
-        self.send(Command::Update { update, bytes, server_memory, reply })?;
-        answer.await.map_err(|_| gone())?
-    }
-
-    pub async fn edits(&self, batch: Vec<Edit>) -> Result<EditsAccepted, ApiError> {
-        let (reply, answer) = oneshot::channel();
-        self.send(Command::Edits { batch, reply })?;
-        answer.await.map_err(|_| gone())?
-    }
-
-    /// Asks for a tick: joins the queued one if there is one (it has not started, so it will
-    /// include everything this client sent before), else queues a new one.
-    pub async fn tick(&self) -> Result<TickStats, ApiError> {
-        if let Some(reason) = self.failure() {
-            return Err(failed(&reason));
-        }
-        let (reply, answer) = oneshot::channel();
-        {
-            let mut waiters = self.tick_waiters.lock().map_err(|_| gone())?;
-            waiters.push(reply);
-            if waiters.len() == 1 {
-                if let Err(e) = self.send(Command::Tick) {
-                    waiters.clear();
-                    return Err(e);
-                }
-            }
-        }
-        answer.await.map_err(|_| gone())?
-    }
-
-    /// Plays an animation on the server's clock from `playing.clock_s`; it is validated
-    /// against the session's scene.
-    pub async fn play(&self, playing: PlayingAnimation) -> Result<(), ApiError> {
-        let (reply, answer) = oneshot::channel();
-        self.send(Command::Play { playing: Box::new(playing), reply })?;
-        answer.await.map_err(|_| gone())?
-    }
-
-    pub async fn snapshot(&self) -> Result<SnapshotParts, ApiError> {
-        let (reply, answer) = oneshot::channel();
-        self.send(Command::Snapshot { reply })?;
-        answer.await.map_err(|_| gone())?
-    }
-
-    pub async fn scene(&self) -> Result<crate::scene::SceneDesc, ApiError> {
-        let (reply, answer) = oneshot::channel();
-        self.send(Command::Scene { reply })?;
-        answer.await.map_err(|_| gone())?
-    }
-
-    /// What the camera sees at film position (`x`, `y`), as of the last tick.
-    pub async fn pick(&self, x: f32, y: f32) -> Result<Option<crate::scene::accel::Picked>, ApiError> {
-        let (reply, answer) = oneshot::channel();
-        self.send(Command::Pick { x, y, reply })?;
-        answer.await.map_err(|_| gone())?
-    }
-
-    /// Makes the session's next command panic inside a turn (tests of the failure path).
-    #[cfg(test)]
-    pub fn inject_panic(&self) -> Result<(), ApiError> {
-        self.send(Command::Panic)
-    }
-
-    pub fn pause(&self) -> Result<(), ApiError> {
-        self.send(Command::Pause)
-    }
-
-    /// Stops the worker after the command in progress and waits for it (blocking: call from
-    /// `spawn_blocking`).
-    pub fn shutdown_blocking(&self) {
-        // Blocks while the queue is full: the worker drains it.
-        if let Ok(commands) = self.commands.lock() {
-            let _ = commands.send(Command::Shutdown);
-        }
-        if let Some(t) = self.thread.lock().ok().and_then(|mut t| t.take()) {
-            let _ = t.join();
-        }
-    }
-}
-
 /// The worker thread: the command loop under `catch_unwind`, so a panic anywhere in it (not
 /// only inside a tick) marks the session failed, with its reason, instead of leaving it
 /// "running" with no thread behind it.
@@ -468,12 +299,21 @@ fn run(w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, playing: Op
     let metrics = w.context.metrics.clone();
     if let Err(panic) = std::panic::catch_unwind(AssertUnwindSafe(|| serve(w, rx, tick_hz, playing))) {
         let reason = format!("panic in the session worker: {}", panic_message(&*panic));
-        tracing::error!(target: "relume::server", "session failed: {reason}");
-        metrics.sessions_failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        if let Ok(mut f) = failure.lock() {
-            *f = Some(reason);
-        }
+        record_failure(&metrics, &failure, reason);
     }
+}
+
+/// Logs and counts a session's failure, and keeps its `reason` for clients.
+fn record_failure(metrics: &Metrics, failure: &Mutex<Option<String>>, reason: String) {
+    tracing::error!(target: "relume::server", "session failed: {reason}");
+    metrics.sessions_failed.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    if let Ok(mut f) = failure.lock() {
+        *f = Some(reason);
+    }
+}
+
+fn read_failure(failure: &Mutex<Option<String>>) -> Option<String> {
+    failure.lock().ok().and_then(|f| f.clone())
 }
 
 fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
