@@ -32,6 +32,7 @@ pub struct SessionHandle {
     pub encoded: crate::server::encoded::EncodedFrames,
     thread: Mutex<Option<JoinHandle<()>>>,
 }
+
 impl SessionHandle {
     /// Starts the worker thread for `session`, which holds `memory` of the server's budget.
     pub fn spawn(
