@@ -4,6 +4,7 @@
 # Extra arguments replace `serve`, e.g. `bash scripts/run.sh render scenes/cornell-box.json ...`.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+scripts/check-disk.sh 2
 scripts/setup.sh
 export PATH="$HOME/.cargo/bin:$PATH"
 cargo build --release --locked

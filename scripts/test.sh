@@ -5,6 +5,7 @@
 # code (and `tests/release_e2e.rs` drives the same binary) that `scripts/run.sh` serves.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+scripts/check-disk.sh 5
 scripts/setup.sh scripts/packages.txt scripts/test-packages.txt
 scripts/pytools.sh
 scripts/nodetools.sh
