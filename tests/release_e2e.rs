@@ -6,7 +6,8 @@
 //! WebSocket, and fetches a PNG and an EXR; it runs `relume render` at packet widths 1, 8 and
 //! 16 under every Embree kernel family this CPU has; it streams an animation at the server with
 //! `relume load`, as a load test does; and it stops the server with SIGTERM, which must exit 0.
-//! A crash anywhere (a signal instead of an exit code) fails the test.
+//! A crash anywhere (a signal instead of an exit code) fails the test. The disk check the build
+//! scripts run first is tested here too.
 mod common;
 use common::process::Served;
 use common::ws::{next_frame, next_text, send};
@@ -129,4 +130,21 @@ fn the_release_binary_renders_at_every_packet_width_under_every_isa() {
         }
     });
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_build_scripts_warn_of_a_disk_too_small_and_never_stop_for_it() {
+    // `scripts/check-disk.sh GIB`, which run.sh and test.sh call before building: asked for more
+    // free space than any disk has, it warns and names the linker's symptom; asked for none, it
+    // is silent (the control: a script that always warned, or never, fails one of the two). It
+    // exits 0 either way, because a warm target/ needs far less than a cold build.
+    let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check-disk.sh");
+    let run = |gib: &str| Command::new("bash").arg(&script).arg(gib).output().expect("bash runs");
+    let short = run("1000000");
+    let warning = String::from_utf8_lossy(&short.stderr);
+    assert!(short.status.success(), "{warning}");
+    assert!(warning.contains("GiB free") && warning.contains("Bus error"), "{warning}");
+    let enough = run("0");
+    assert!(enough.status.success());
+    assert!(enough.stderr.is_empty(), "{}", String::from_utf8_lossy(&enough.stderr));
 }
