@@ -137,7 +137,8 @@ fn the_build_scripts_warn_of_a_disk_too_small_and_never_stop_for_it() {
     // `scripts/check-disk.sh GIB`, which run.sh and test.sh call before building: asked for more
     // free space than any disk has, it warns and names the linker's symptom; asked for none, it
     // is silent (the control: a script that always warned, or never, fails one of the two). It
-    // exits 0 either way, because a warm target/ needs far less than a cold build.
+    // exits 0 either way, because a warm target/ needs far less than a cold build, and also when
+    // `df` fails (a `df` that exits 1 is put first on PATH), where it cannot tell.
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check-disk.sh");
     let run = |gib: &str| Command::new("bash").arg(&script).arg(gib).output().expect("bash runs");
     let short = run("1000000");
@@ -147,4 +148,13 @@ fn the_build_scripts_warn_of_a_disk_too_small_and_never_stop_for_it() {
     let enough = run("0");
     assert!(enough.status.success());
     assert!(enough.stderr.is_empty(), "{}", String::from_utf8_lossy(&enough.stderr));
+    let no_df = std::env::temp_dir().join(format!("relume-no-df-{}", std::process::id()));
+    std::fs::create_dir_all(&no_df).expect("temp dir");
+    std::fs::write(no_df.join("df"), "#!/bin/sh\nexit 1\n").expect("write df");
+    let executable = std::os::unix::fs::PermissionsExt::from_mode(0o755);
+    std::fs::set_permissions(no_df.join("df"), executable).expect("chmod df");
+    let path = format!("{}:{}", no_df.display(), std::env::var("PATH").unwrap_or_default());
+    let blind = Command::new("bash").arg(&script).arg("1000000").env("PATH", path).output().expect("bash runs");
+    assert!(blind.status.success(), "{}", String::from_utf8_lossy(&blind.stderr));
+    assert!(blind.stderr.is_empty(), "{}", String::from_utf8_lossy(&blind.stderr));
 }
