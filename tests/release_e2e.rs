@@ -140,12 +140,16 @@ fn the_build_scripts_warn_of_a_disk_too_small_and_never_stop_for_it() {
     // exits 0 either way, because a warm target/ needs far less than a cold build, and also when
     // `df` fails (a `df` that exits 1 is put first on PATH), where it cannot tell.
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scripts/check-disk.sh");
-    let run = |gib: &str| Command::new("bash").arg(&script).arg(gib).output().expect("bash runs");
-    let short = run("1000000");
+    let check = |gib: &str| {
+        let mut c = Command::new("bash");
+        c.arg(&script).arg(gib);
+        c
+    };
+    let short = check("1000000").output().expect("bash runs");
     let warning = String::from_utf8_lossy(&short.stderr);
     assert!(short.status.success(), "{warning}");
     assert!(warning.contains("GiB free") && warning.contains("Bus error"), "{warning}");
-    let enough = run("0");
+    let enough = check("0").output().expect("bash runs");
     assert!(enough.status.success());
     assert!(enough.stderr.is_empty(), "{}", String::from_utf8_lossy(&enough.stderr));
     let no_df = std::env::temp_dir().join(format!("relume-no-df-{}", std::process::id()));
@@ -154,7 +158,8 @@ fn the_build_scripts_warn_of_a_disk_too_small_and_never_stop_for_it() {
     let executable = std::os::unix::fs::PermissionsExt::from_mode(0o755);
     std::fs::set_permissions(no_df.join("df"), executable).expect("chmod df");
     let path = format!("{}:{}", no_df.display(), std::env::var("PATH").unwrap_or_default());
-    let blind = Command::new("bash").arg(&script).arg("1000000").env("PATH", path).output().expect("bash runs");
+    let blind = check("1000000").env("PATH", path).output().expect("bash runs");
+    let _ = std::fs::remove_dir_all(&no_df);
     assert!(blind.status.success(), "{}", String::from_utf8_lossy(&blind.stderr));
     assert!(blind.stderr.is_empty(), "{}", String::from_utf8_lossy(&blind.stderr));
 }
