@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Installs the Python tools the tests use into .deps/pytools (outside git), only when missing:
 # kubernetes-validate, which checks deploy/kubernetes/ against the Kubernetes API schemas it
-# carries (offline once installed; tests/kubernetes.rs). `pip --target` leaves the system's
+# carries (offline once installed; tests/deploy.rs). `pip --target` leaves the system's
 # Python untouched.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what relume needs on Debian bookworm, only what is missing: the packages listed in the
 # given files (default scripts/packages.txt, which the Dockerfile shares), a Rust toolchain
-# if cargo is absent, and Intel's Open Image Denoise in .deps/oidn (scripts/oidn.sh).
+# if cargo is absent, Embree 4 in .deps/embree where the system has none (scripts/embree.sh),
+# and Intel's Open Image Denoise in .deps/oidn (scripts/oidn.sh).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 lists=("$@")
@@ -23,4 +24,5 @@ if ! command -v cargo >/dev/null 2>&1 && [ ! -x "$HOME/.cargo/bin/cargo" ]; then
   echo "setup: installing the Rust toolchain (rustup)" >&2
   curl --proto '=https' --tlsv1.2 -sSf https://sh.rustup.rs | sh -s -- -y --profile minimal
 fi
+"$here/embree.sh"
 "$here/oidn.sh"

@@ -10,7 +10,7 @@
 //! - [`film`]: accumulation, resolve, encoding.
 //! - [`scene`]: the scene model, loading and validation, animations, edits, and the two-level
 //!   Embree acceleration structure.
-//! - [`embree`]: a safe wrapper over system Embree 3, and the only module with FFI code.
+//! - [`embree`]: a safe wrapper over Intel Embree 4, and the only module with FFI code.
 //! - [`core`]: colour, random numbers, sampling, frames, robust ray offsets.
 //!
 //! # Conventions

@@ -21,11 +21,12 @@ use relume::tools::{
     serve,
 };
 use std::process::ExitCode;
+use std::sync::OnceLock;
 
 #[derive(Parser)]
 #[command(
     name = "relume",
-    version,
+    version = version_line(),
     about = "Dynamic global illumination: resident light transport, verified and partly retraced every tick"
 )]
 struct Cli {
@@ -68,6 +69,18 @@ enum BenchCommand {
     /// One session spamming ticks next to one ticking steadily: the steady one's latency alone
     /// and under the spam.
     Fairness(bench_fairness::FairnessArgs),
+}
+
+/// `relume --version`: relume's version and the Embree library it runs (from a device).
+fn version_line() -> &'static str {
+    static LINE: OnceLock<String> = OnceLock::new();
+    LINE.get_or_init(|| {
+        let relume = env!("CARGO_PKG_VERSION");
+        match relume::embree::Device::new(1) {
+            Ok(device) => format!("{relume}, Embree {} ({} kernels)", device.version(), device.isa()),
+            Err(e) => format!("{relume}, Embree unavailable: {e}"),
+        }
+    })
 }
 
 fn main() -> ExitCode {

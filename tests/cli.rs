@@ -17,6 +17,17 @@ fn out_dir(tag: &str) -> PathBuf {
 }
 
 #[test]
+fn version_names_relume_and_the_embree_4_it_runs() {
+    let out = relume().arg("--version").output().unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    let device = relume::embree::Device::new(1).unwrap();
+    assert_eq!(device.version().major, 4, "linked against Embree {}", device.version());
+    let want = format!("relume {}, Embree {} ({} kernels)", env!("CARGO_PKG_VERSION"), device.version(), device.isa());
+    assert_eq!(text.trim(), want);
+}
+
+#[test]
 fn render_writes_png_and_exr() {
     let dir = out_dir("still");
     for ext in ["png", "exr"] {

@@ -207,7 +207,7 @@ fn embree_errors_come_back_as_err() {
 
 #[test]
 fn instance_normals_are_reported_in_object_space() {
-    // Pins down what Embree 3 reports as Ng for instanced geometry: the scene layer transforms it.
+    // Pins down what Embree reports as Ng for instanced geometry (`RTCHit(3)`): the scene layer transforms it.
     let device = Device::new(1).unwrap();
     let blas = Arc::new(square(&device).commit().unwrap());
     let mut top = Scene::new(&device, SceneQuality::Dynamic).unwrap();

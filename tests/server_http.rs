@@ -14,7 +14,13 @@ async fn every_route_answers() {
     let s = TestServer::start(None, Limits::default()).await;
     let http = &s.http;
 
-    assert_eq!(http.get(s.url("/healthz")).send().await.unwrap().text().await.unwrap(), "ok\n");
+    // Health names the Embree library this process loaded, which must be Embree 4.
+    let embree = relume::embree::Device::new(1).unwrap();
+    assert_eq!(embree.version().major, 4, "linked against Embree {}", embree.version());
+    let health = http.get(s.url("/healthz")).send().await.unwrap().text().await.unwrap();
+    let want =
+        format!("ok\nrelume {}\nembree {} ({})\n", env!("CARGO_PKG_VERSION"), embree.version(), s.state.device.isa());
+    assert_eq!(health, want);
     let scenes: Value = http.get(s.url("/v1/scenes")).send().await.unwrap().json().await.unwrap();
     let names: Vec<&str> = scenes["scenes"].as_array().unwrap().iter().map(|e| e["name"].as_str().unwrap()).collect();
     assert!(names.contains(&"cornell-box") && names.contains(&"walker"), "{names:?}");
@@ -79,6 +85,8 @@ async fn every_route_answers() {
     // Metrics count what happened.
     let m = http.get(s.url("/metrics")).send().await.unwrap().text().await.unwrap();
     assert!(m.contains("relume_sessions 1"), "{m}");
+    let info = format!("relume_build_info{{version=\"{}\",embree=\"{}\",", env!("CARGO_PKG_VERSION"), embree.version());
+    assert!(m.contains(&info), "{m}");
     assert!(m.contains("relume_ticks_total 2"));
     assert!(m.contains("relume_tick_seconds_count 2"));
     assert!(!m.contains("relume_encode_seconds_total 0\n"), "three frames were encoded: {m}");

@@ -16,7 +16,27 @@ struct DeviceHandle {
     raw: sys::RTCDevice,
     /// The kernel family Embree runs: the cap asked for, or the widest this CPU has.
     isa: Isa,
+    /// The library's version as it reports it (`rtcGetDeviceProperty`), e.g. `4.4.0`.
+    version: Version,
 }
+
+/// An Embree library version.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub struct Version {
+    pub major: u32,
+    pub minor: u32,
+    pub patch: u32,
+}
+
+impl std::fmt::Display for Version {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}.{}.{}", self.major, self.minor, self.patch)
+    }
+}
+
+/// The version of the headers the bindings were generated from.
+pub const HEADER_VERSION: Version =
+    Version { major: sys::RTC_VERSION_MAJOR, minor: sys::RTC_VERSION_MINOR, patch: sys::RTC_VERSION_PATCH };
 
 // SAFETY: Embree devices are thread-safe: the API may be called on one device from any thread
 // (Embree API docs, "Thread Safety"). The handle is only released in `Drop`, once.
@@ -83,18 +103,32 @@ impl Device {
         // SAFETY: `raw` is a live device; the callback is a plain extern fn with no user data,
         // valid for the whole program.
         unsafe { sys::rtcSetDeviceErrorFunction(raw, Some(log_device_error), std::ptr::null_mut()) };
+        let version = library_version(raw);
+        if version.major != HEADER_VERSION.major || version.minor < HEADER_VERSION.minor {
+            // SAFETY: `raw` is live and released once, here, since no handle owns it yet.
+            unsafe { sys::rtcReleaseDevice(raw) };
+            return Err(EmbreeError::LibraryVersion {
+                found: version.to_string(),
+                headers: HEADER_VERSION.to_string(),
+            });
+        }
         let widest = Isa::supported().last().copied().unwrap_or(Isa::Sse2);
         let isa = config
             .split(',')
             .filter_map(|kv| kv.trim().strip_prefix("max_isa=").or_else(|| kv.trim().strip_prefix("isa=")))
             .find_map(|name| name.parse::<Isa>().ok())
             .map_or(widest, |cap| cap.min(widest));
-        Ok(Device { inner: Arc::new(DeviceHandle { raw, isa }) })
+        Ok(Device { inner: Arc::new(DeviceHandle { raw, isa, version }) })
     }
 
     /// The kernel family this device's queries run.
     pub fn isa(&self) -> Isa {
         self.inner.isa
+    }
+
+    /// The version of the Embree library this device runs on.
+    pub fn version(&self) -> Version {
+        self.inner.version
     }
 
     pub(crate) fn raw(&self) -> sys::RTCDevice {
@@ -113,10 +147,22 @@ impl Device {
     }
 }
 
+/// The library's version, from `rtcGetDeviceProperty(3)`.
+fn library_version(raw: sys::RTCDevice) -> Version {
+    // SAFETY: `raw` is a live device; the version properties take no arguments and only read.
+    let property = |p| unsafe { sys::rtcGetDeviceProperty(raw, p) }.max(0) as u32;
+    Version {
+        major: property(sys::RTC_DEVICE_PROPERTY_VERSION_MAJOR),
+        minor: property(sys::RTC_DEVICE_PROPERTY_VERSION_MINOR),
+        patch: property(sys::RTC_DEVICE_PROPERTY_VERSION_PATCH),
+    }
+}
+
 impl std::fmt::Debug for Device {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("Device")
             .field("isa", &self.inner.isa)
+            .field("version", &self.inner.version)
             .field("holders", &Arc::strong_count(&self.inner))
             .finish()
     }

@@ -10,6 +10,8 @@ pub enum EmbreeError {
     InvalidGeometry(String),
     #[error("unknown geometry id {0}")]
     UnknownGeometry(u32),
+    #[error("the Embree library loaded is {found}; relume was built against the {headers} headers and needs 4.x at least as new")]
+    LibraryVersion { found: String, headers: String },
     #[error("scene is still shared by {0} other holder(s); it cannot be edited while tracing")]
     SceneShared(usize),
 }

@@ -8,7 +8,7 @@
 use std::fmt;
 use std::str::FromStr;
 
-/// One of Embree 3's kernel families, named as `max_isa=` spells it.
+/// One of Embree 4's kernel families, named as `max_isa=` spells it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub enum Isa {
     Sse2,

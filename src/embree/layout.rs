@@ -52,10 +52,10 @@ const _: () = assert!(align_of::<sys::RTCRay16>() >= 64 && align_of::<sys::RTCRa
 const _: () = assert!(align_of::<sys::RTCRay>() >= 16 && align_of::<sys::RTCRayHit>() >= 16);
 // `rtcGetSceneBounds(3)`: "the provided destination pointer must be aligned to 16 bytes".
 const _: () = assert!(align_of::<sys::RTCBounds>() >= 16);
-// The intersection context has no stated alignment beyond its fields' (it holds a pointer).
-const _: () = assert!(align_of::<sys::RTCIntersectContext>() >= align_of::<usize>());
-// One instance level: the header's `RTC_MAX_INSTANCE_LEVEL_COUNT` is 1, and `Hit` reads `instID[0]`.
-const _: () = assert!(size_of::<sys::RTCHit>() == 8 * 4);
+// The query arguments and context have no stated alignment beyond their fields' (they hold pointers).
+const _: () = assert!(align_of::<sys::RTCIntersectArguments>() >= align_of::<usize>());
+// One instance level: `Hit` reads `instID[0]`, and `query_context` in version.rs fills the stack.
+const _: () = assert!(sys::RTC_MAX_INSTANCE_LEVEL_COUNT == 1);
 
 #[cfg(test)]
 mod tests {

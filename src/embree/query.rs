@@ -40,7 +40,7 @@ pub struct Hit {
     /// Barycentrics: the hit is `(1-u-v)·v0 + u·v1 + v·v2`.
     pub u: f32,
     pub v: f32,
-    /// Unnormalised geometric normal `(v1-v0)×(v2-v0)` as Embree 3 reports it: in the object
+    /// Unnormalised geometric normal `(v1-v0)×(v2-v0)` as Embree reports it (`RTCHit(3)`): in the object
     /// space of the instance for instanced geometry (not world space).
     pub ng: Vec3,
     /// `instID`: the top-level instance hit, or `None` for geometry hit directly.

@@ -19,8 +19,8 @@ pub enum SceneQuality {
 }
 
 /// Which triangle test Embree compiles in. `Robust` (`RTC_SCENE_FLAG_ROBUST`) is watertight
-/// along shared edges; Embree 3 then also ignores `RTC_BUILD_QUALITY_HIGH`'s spatial splits.
-/// `Fast` is Embree's default kernel.
+/// along shared edges and avoids optimisations that reduce arithmetic accuracy. `Fast` is
+/// Embree's default kernel.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Intersector {

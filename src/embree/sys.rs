@@ -1,4 +1,4 @@
-//! Raw bindgen output for Embree 3 (`rtc*` functions, `RTC*` types and constants).
+//! Raw bindgen output for Embree 4 (`rtc*` functions, `RTC*` types and constants).
 //! Nothing outside `src/embree/` uses these directly.
 #![allow(non_upper_case_globals, non_camel_case_types, non_snake_case, dead_code, clippy::all)]
 include!(concat!(env!("OUT_DIR"), "/embree_bindings.rs"));

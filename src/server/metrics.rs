@@ -12,6 +12,9 @@ const TICK_BUCKETS: [f64; 12] = [0.005, 0.01, 0.025, 0.05, 0.1, 0.25, 0.5, 1.0, 
 
 /// The server's state as `/metrics` reports it besides the counters.
 pub struct Gauges {
+    /// The Embree library the server traces with, and its kernel family.
+    pub embree: crate::embree::Version,
+    pub isa: crate::embree::Isa,
     pub sessions: usize,
     pub reserved_bytes: u64,
     pub draining: bool,
@@ -82,6 +85,14 @@ impl Metrics {
         let sessions = now.sessions;
         let mut out = String::new();
         let get = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        let _ = writeln!(
+            out,
+            "# HELP relume_build_info The relume build and the Embree library it runs.\n# TYPE relume_build_info gauge\n\
+             relume_build_info{{version=\"{}\",embree=\"{}\",embree_isa=\"{}\"}} 1",
+            env!("CARGO_PKG_VERSION"),
+            now.embree,
+            now.isa
+        );
         let mut counter = |name: &str, help: &str, value: u64| {
             let _ = writeln!(out, "# HELP relume_{name} {help}\n# TYPE relume_{name} counter\nrelume_{name} {value}");
         };

@@ -71,15 +71,18 @@ pub fn parse_body<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     })
 }
 
-/// `ok` while the node takes sessions; 503 `draining` (with `Retry-After`) once it drains, so
-/// a proxy's health check stops sending it new sessions while its own still reach it.
-pub async fn healthz(State(s): State<Shared>) -> Result<&'static str, ApiError> {
+/// `ok` while the node takes sessions, then the versions it runs (`relume X`, `embree Y
+/// (ISA)`); 503 `draining` (with `Retry-After`) once it drains, so a proxy's health check stops
+/// sending it new sessions while its own still reach it.
+pub async fn healthz(State(s): State<Shared>) -> Result<String, ApiError> {
     s.refuse_if_draining()?;
-    Ok("ok\n")
+    Ok(format!("ok\nrelume {}\nembree {} ({})\n", env!("CARGO_PKG_VERSION"), s.device.version(), s.device.isa()))
 }
 
 pub async fn metrics(State(s): State<Shared>) -> Response {
     let now = super::metrics::Gauges {
+        embree: s.device.version(),
+        isa: s.device.isa(),
         sessions: s.session_count(),
         reserved_bytes: s.reserved_bytes(),
         draining: s.is_draining(),

@@ -1,3 +1,8 @@
+//! The deployment files against what they deploy.
+//!
+//! The Dockerfile against the setup scripts: it builds on Debian trixie with Debian's Embree 4,
+//! installs the package list scripts/setup.sh installs, and runs only scripts that exist.
+//!
 //! deploy/kubernetes/ against the Kubernetes API schemas (kubernetes-validate, installed into
 //! .deps/pytools by scripts/test.sh, offline), with a negative control, and against the rest of
 //! the repository: the proxy's ConfigMap carries deploy/haproxy/ unchanged, it names one node
@@ -99,3 +104,53 @@ fn the_manifests_agree_with_the_proxy_config_and_the_binary() {
         );
     }
 }
+
+/// What is wrong with a Dockerfile's text, against scripts/packages.txt: empty when nothing is.
+fn dockerfile_problems(docker: &str) -> Vec<String> {
+    let mut problems = Vec::new();
+    for from in docker.lines().filter(|l| l.starts_with("FROM ")) {
+        if !from.contains("trixie") {
+            problems.push(format!("`{from}` is not Debian trixie, whose libembree-dev is Embree 4"));
+        }
+    }
+    for needed in [
+        "COPY scripts/packages.txt scripts/packages.txt",
+        "grep -v '^\\s*#' scripts/packages.txt",
+        "--no-install-recommends libembree-dev",
+        "--no-install-recommends libembree4-4",
+    ] {
+        if !docker.contains(needed) {
+            problems.push(format!("the Dockerfile lacks `{needed}`"));
+        }
+    }
+    for script in docker.split_whitespace().filter(|w| w.starts_with("scripts/") && w.ends_with(".sh")) {
+        if !root().join(script).exists() {
+            problems.push(format!("the Dockerfile runs {script}, which does not exist"));
+        }
+    }
+    let packages = std::fs::read_to_string(root().join("scripts/packages.txt")).unwrap();
+    if packages.lines().any(|l| l.trim().starts_with("libembree")) {
+        problems.push("scripts/packages.txt installs a libembree: on bookworm that is Embree 3".into());
+    }
+    problems
+}
+
+#[test]
+fn the_dockerfile_builds_on_trixie_with_debians_embree_4_and_the_scripts_package_list() {
+    let docker = std::fs::read_to_string(root().join("Dockerfile")).unwrap();
+    assert_eq!(dockerfile_problems(&docker), Vec::<String>::new());
+    // Negative controls: each broken variant is caught.
+    for (from, to) in [
+        ("rust:1-trixie", "rust:1-bookworm"),
+        ("debian:trixie-slim", "debian:bookworm-slim"),
+        (" libembree-dev ", " "),
+        ("libembree4-4", "libembree3-3"),
+        ("scripts/oidn.sh", "scripts/oidn-gone.sh"),
+        ("COPY scripts/packages.txt", "COPY scripts/other.txt"),
+    ] {
+        assert!(docker.contains(from), "the control's `{from}` is not in the Dockerfile");
+        let broken = docker.replace(from, to);
+        assert!(!dockerfile_problems(&broken).is_empty(), "a Dockerfile with `{to}` for `{from}` passed");
+    }
+}
+
