@@ -154,3 +154,32 @@ fn the_dockerfile_builds_on_trixie_with_debians_embree_4_and_the_scripts_package
     }
 }
 
+/// The lines of `text` that point outside the repository: at the developers' shared folder, its
+/// papers or its architecture page. A clone has none of them, so the repository carries its own
+/// map (docs/architecture.md) and cites papers in full.
+fn outside_references(text: &str) -> Vec<&str> {
+    const OUTSIDE: [&str; 3] = ["../shared", "shared/papers", "ARCHITECTURE.md"];
+    text.lines().filter(|line| OUTSIDE.iter().any(|o| line.contains(o))).collect()
+}
+
+#[test]
+fn no_file_in_the_repository_points_outside_it() {
+    let listed = Command::new("git").args(["ls-files", "-z"]).current_dir(root()).output().unwrap();
+    assert!(listed.status.success(), "git ls-files failed");
+    let files: Vec<String> = String::from_utf8_lossy(&listed.stdout)
+        .split('\0')
+        .filter(|f| !f.is_empty() && *f != "tests/deploy.rs")
+        .map(str::to_string)
+        .collect();
+    assert!(files.len() > 100, "only {} files listed", files.len());
+    let mut found = Vec::new();
+    for file in &files {
+        let Ok(text) = std::fs::read_to_string(root().join(file)) else { continue };
+        found.extend(outside_references(&text).into_iter().map(|line| format!("{file}: {}", line.trim())));
+    }
+    assert!(found.is_empty(), "files point outside the repository:\n{}", found.join("\n"));
+    // Negative control: each kind of outside reference is caught.
+    for line in ["see ../shared/ARCHITECTURE.md", "(`shared/papers/x.md`)", "ARCHITECTURE.md, tick step 7"] {
+        assert_eq!(outside_references(line), vec![line], "{line} was not caught");
+    }
+}

@@ -1,4 +1,4 @@
-//! The engine's denoise stage (ARCHITECTURE.md, tick step 7): after resolve, the accumulated
+//! The engine's denoise stage (docs/architecture.md, tick step 7): after resolve, the accumulated
 //! image goes through OIDN ([`Denoiser`]), guided by auxiliary images the stage traces itself.
 //! It belongs to no technique, so every technique gets it, and their raw images are untouched.
 //!

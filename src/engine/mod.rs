@@ -1,5 +1,5 @@
 //! The engine: a [`Session`] owns a scene, its Embree scenes, a technique and a film, and runs
-//! the tick pipeline (ARCHITECTURE.md, "The tick"):
+//! the tick pipeline (docs/architecture.md, "The tick"):
 //!
 //! 1. **Drain** the queue of client edits.
 //! 2. **Apply** them to the scene model → [`SceneDelta`] (latest edit per target wins; the

@@ -1,5 +1,5 @@
 //! Encoded frames, made once per (image, format, exposure) and shared by every HTTP client and
-//! WebSocket subscriber that asks for the same one (ARCHITECTURE.md, "Publish"). An image is
+//! WebSocket subscriber that asks for the same one (docs/architecture.md, "Publish"). An image is
 //! named by the tick that made it, so the frames of a view at rest (whose ticks reuse the last
 //! image) share one encoding and one ETag.
 //!

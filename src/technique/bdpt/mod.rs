@@ -1,8 +1,8 @@
 //! `bdpt`: bidirectional path tracing with light-subpath permutation and path regeneration.
 //!
 //! Papers: E. Veach, "Robust Monte Carlo Methods for Light Transport Simulation" (1997), ch. 10;
-//! J. Novák, V. Havran, C. Dachsbacher, "Path Regeneration for Interactive Path Tracing" (2010),
-//! §3.4 (`shared/papers/path-regeneration-interactive-path-tracing.md`).
+//! J. Novák, V. Havran, C. Dachsbacher, "Path Regeneration for Interactive Path Tracing",
+//! Eurographics 2010 Short Papers, pp. 61–64, 2010, doi:10.2312/egsh.20101048, §3.4.
 //!
 //! # Algorithm (per pass)
 //! 1. Split the image into packet queues as `path` does (`path/packets.rs`), and trace a batch

@@ -1,8 +1,9 @@
 //! `instant_cache`: virtual point lights gathered through an irradiance cache.
 //!
-//! Paper: K. Debattista, P. Dubla, L. P. Santos, A. Chalmers, "Instant Caching for Interactive
-//! Global Illumination" (`shared/papers/instant-caching-interactive-gi.md`); the `igi` baseline
-//! is Wald et al.'s instant global illumination.
+//! Paper: K. Debattista, P. Dubla, F. Banterle, L. P. Santos, A. Chalmers, "Instant Caching for
+//! Interactive Global Illumination", Computer Graphics Forum 28(8):2216–2228, 2009,
+//! doi:10.1111/j.1467-8659.2009.01435.x; the `igi` baseline is Wald et al.'s instant global
+//! illumination.
 //!
 //! # Algorithm (per tick)
 //! 1. Shoot VPLs (`vpl.rs`, §3.1): Halton-sequenced photon paths at fixed indices, a VPL at

@@ -1,7 +1,7 @@
 //! `particle_gi`: diffuse interreflection in two particle spaces.
 //!
-//! Paper: B. Chang, S. Park, I. Ihm, "Diffuse Global Illumination in Particle Spaces"
-//! (`shared/papers/diffuse-gi-in-particle-spaces.md`).
+//! Paper: B. Chang, S. Park, I. Ihm, "Diffuse Global Illumination in Particle Spaces",
+//! Multimedia Tools and Applications 74(13):4987–5006, 2015, doi:10.1007/s11042-014-2132-x.
 //!
 //! # Algorithm
 //! 1. Geometry stage (§4.1; when geometry changes): area particles over the diffuse surfaces

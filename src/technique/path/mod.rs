@@ -2,7 +2,7 @@
 //! error figure in relume.
 //!
 //! Paper: J. Novák, V. Havran, C. Dachsbacher, "Path Regeneration for Interactive Path Tracing",
-//! Eurographics 2010 short paper (`shared/papers/path-regeneration-interactive-path-tracing.md`).
+//! Eurographics 2010 Short Papers, pp. 61–64, 2010, doi:10.2312/egsh.20101048.
 //!
 //! # Algorithm
 //! 1. Split the image into queues of consecutive pixels, one packet of `packet_width` lanes per

@@ -2,7 +2,7 @@
 //! what changed and retraces only the invalid segments.
 //!
 //! Paper: P. Moreau, M. Doggett, E. Sintorn, "Path Verification for Dynamic Indirect
-//! Illumination" (`shared/papers/path-verification-dynamic-indirect-illumination.md`).
+//! Illumination", arXiv:2111.06906 [cs.GR], 2021, doi:10.48550/arXiv.2111.06906.
 //!
 //! # Algorithm (per tick; Figure 3's five steps, then the photon map)
 //! Steps 2–4 run in order in `update.rs`.
