@@ -49,6 +49,35 @@ fn bundled_scenes_and_animations_match_their_schemas() {
     assert!(checked >= 18, "only {checked} documents found");
 }
 
+/// Every bundled scene, as the server sends it back (`GET /v1/sessions/{id}/scene` and the
+/// snapshot's scene are the loaded scene's description), still matches the scene schema: an
+/// optional field the loader filled in must be left out, never sent as `null`.
+#[test]
+fn loaded_scenes_serialize_back_to_their_schema() {
+    let scene_schema = validator("scene.schema.json");
+    let mut spots = 0;
+    let mut names: Vec<String> = std::fs::read_dir(scenes_dir())
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().to_string())
+        .filter(|n| n.ends_with(".json") && !n.ends_with(".anim.json"))
+        .collect();
+    names.sort();
+    assert!(names.len() >= 10, "{names:?}");
+    for name in &names {
+        let scene = common::load(name);
+        let doc = serde_json::to_value(scene.desc()).unwrap();
+        spots += doc["lights"].as_array().map_or(0, |l| l.iter().filter(|l| l["emitter"]["type"] == "spot").count());
+        let errs = errors(&scene_schema, &doc);
+        assert!(errs.is_empty(), "{name} as served back: {errs:?}");
+    }
+    assert!(spots > 0, "no bundled scene has a spot light, so the null case is not exercised");
+    // Negative control: the schema refuses a spot light's `falloff_start_deg: null`.
+    let mut doc = serde_json::to_value(common::load("maze.json").desc()).unwrap();
+    let spot = doc["lights"].as_array_mut().unwrap().iter_mut().find(|l| l["emitter"]["type"] == "spot").unwrap();
+    spot["emitter"]["falloff_start_deg"] = Value::Null;
+    assert!(!errors(&scene_schema, &doc).is_empty(), "a null falloff_start_deg passed the schema");
+}
+
 #[test]
 fn websocket_examples_match_the_ws_schema() {
     let ws = validator("ws.schema.json");

@@ -107,12 +107,14 @@ async fn server_driven_ticks_and_frame_waits() {
     assert_eq!(r.status(), 200);
     let tick: u64 = r.headers()["x-relume-tick"].to_str().unwrap().parse().unwrap();
     assert!(tick >= 3);
-    // A tick far in the future times out (bounded wait), with a JSON error.
+    // A reachable tick that never comes (nothing ticks this session) times out after the
+    // bounded wait, with a JSON error. (0.2 s at the default 120 ticks a second reaches tick
+    // 24; an unreachable one is refused at once, a_frame_for_an_unreachable_tick_is_refused_at_once.)
     let short =
         TestServer::start(None, Limits { frame_wait: std::time::Duration::from_millis(200), ..Limits::default() })
             .await;
     let id2 = short.session(small("cornell-box")).await;
-    let r = short.http.get(short.url(&format!("/v1/sessions/{id2}/frame.png?tick=1000"))).send().await.unwrap();
+    let r = short.http.get(short.url(&format!("/v1/sessions/{id2}/frame.png?tick=20"))).send().await.unwrap();
     assert_eq!(r.status(), 408);
     let v: Value = r.json().await.unwrap();
     assert_eq!(v["error"], "timeout");
@@ -374,12 +376,48 @@ async fn every_response_names_its_node_and_session_ids_start_with_it() {
     assert!(id.starts_with("test-node.s"), "{id}");
     let (prefix, rest) = id.split_once('.').expect("a node prefix");
     assert!(prefix == "test-node" && !rest.contains('.'), "{id}");
+    http.post(s.url(&format!("/v1/sessions/{id}/tick"))).send().await.unwrap();
     for r in [
         http.get(s.url(&format!("/v1/sessions/{id}"))).send().await.unwrap(),
         http.get(s.url("/v1/sessions/nobody.s1-0")).send().await.unwrap(),
         http.post(s.url("/v1/sessions")).body("{").header("content-type", "application/json").send().await.unwrap(),
         http.get(s.url("/healthz")).send().await.unwrap(),
+        http.get(s.url("/")).send().await.unwrap(),
+        http.get(s.url(&format!("/v1/sessions/{id}/frame.png?tick=0"))).send().await.unwrap(),
     ] {
         assert_eq!(node(&r).as_deref(), Some("test-node"), "{} {:?}", r.status(), r.url().path());
+        // Every page and frame also tells the browser not to sniff types, and what it may load.
+        let header = |name: &str| r.headers().get(name).map(|v| v.to_str().unwrap_or("").to_string());
+        assert_eq!(header("x-content-type-options").as_deref(), Some("nosniff"), "{:?}", r.url().path());
+        assert_eq!(
+            header("content-security-policy").as_deref(),
+            Some(relume::server::CONTENT_SECURITY_POLICY),
+            "{:?}",
+            r.url().path()
+        );
     }
+    let csp = relume::server::CONTENT_SECURITY_POLICY;
+    assert!(csp.contains("script-src 'self'") && !csp.contains("unsafe-inline"), "{csp}");
+}
+
+/// A frame for a tick the session cannot reach within the frame wait, even ticking as fast as
+/// the server allows, is refused at once (422 naming `tick`), not held for the whole wait. At
+/// the edge of the bound, the last reachable tick is waited for (and here times out, 408).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_frame_for_an_unreachable_tick_is_refused_at_once() {
+    // 10 ticks a second for 0.1 s: one tick can arrive, so with no tick run yet tick 1 is the
+    // last reachable one.
+    let limits = Limits { frame_wait: std::time::Duration::from_millis(100), max_tick_hz: 10.0, ..Limits::default() };
+    let s = TestServer::start(None, limits).await;
+    let id = s.session(small("cornell-box")).await;
+    let get = |tick: u64| s.http.get(s.url(&format!("/v1/sessions/{id}/frame.exr?tick={tick}"))).send();
+    for tick in [2, 445_724_606_459_404, u64::MAX] {
+        let r = get(tick).await.unwrap();
+        assert_eq!(r.status(), 422, "tick {tick}");
+        let v: Value = r.json().await.unwrap();
+        assert!(v["detail"].as_str().unwrap().starts_with("tick: "), "{v}");
+    }
+    // The bound's edge: tick 1 is reachable, so it is waited for until the frame wait ends.
+    assert_eq!(get(1).await.unwrap().status(), 408);
+    s.shutdown().await.unwrap();
 }

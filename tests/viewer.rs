@@ -127,6 +127,19 @@ async fn the_viewer_starts_a_session_and_a_drag_moves_the_object() {
         .unwrap();
     let target = c.execute("return document.getElementById('target').value", vec![]).await.unwrap();
     assert_eq!(target, "object/bunny-1");
+    // Under the server's Content-Security-Policy the frame (a blob: image) decodes at the
+    // session's size, and the stage bars (styled through the DOM, not inline attributes) have
+    // their widths: a policy that blocked either would leave them empty.
+    let shown = wait_for(
+        &c,
+        "const f = document.getElementById('frame'); return f.complete ? f.naturalWidth : 0",
+        |v| v.as_u64() > Some(0),
+        "a decoded frame",
+    )
+    .await;
+    assert_eq!(shown.as_u64(), Some(128), "the frame image is not the session's 128 pixels wide");
+    let bar = c.execute("return document.querySelector('#stages .bar').style.width", vec![]).await.unwrap();
+    assert!(bar.as_str().is_some_and(|w| w.ends_with('%')), "a stage bar has no width: {bar}");
 
     // Drag across the image with real pointer input.
     let img = c.find(Locator::Id("frame")).await.unwrap();

@@ -184,7 +184,8 @@ pub enum EmitterDesc {
         intensity: Rgb,
         #[serde(default = "default_cone")]
         cone_deg: f32,
-        #[serde(default)]
+        /// Absent (never `null`) when not given: the schema's number has no null.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
         falloff_start_deg: Option<f32>,
     },
     /// One-sided rectangle ([-1,1]² in XY, emitting to +Z); `radiance` in W/(sr·m²).

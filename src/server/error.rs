@@ -4,6 +4,7 @@ use super::protocol::ErrorBody;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use axum::Json;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 /// An error answer. `error` is a stable machine-readable code; `detail` is for people.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -34,10 +35,17 @@ impl ApiError {
         ApiError::new(StatusCode::NOT_FOUND, "not_found", detail)
     }
 
+    /// A 500 whose answer names only a reference: what went wrong inside (paths, library
+    /// messages) goes to the log under that reference, never to the client.
     pub fn internal(detail: impl Into<String>) -> ApiError {
-        let detail = detail.into();
-        tracing::error!(target: "relume::server", "internal error: {detail}");
-        ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", detail)
+        static NEXT_REFERENCE: AtomicU64 = AtomicU64::new(1);
+        let reference = NEXT_REFERENCE.fetch_add(1, Ordering::Relaxed);
+        tracing::error!(target: "relume::server", reference, "internal error: {}", detail.into());
+        ApiError::new(
+            StatusCode::INTERNAL_SERVER_ERROR,
+            "internal",
+            format!("an internal error occurred; the server logged it as reference {reference}"),
+        )
     }
 }
 
@@ -58,5 +66,25 @@ impl IntoResponse for ApiError {
 impl From<crate::scene::SceneError> for ApiError {
     fn from(e: crate::scene::SceneError) -> ApiError {
         ApiError::invalid(e.to_string())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_internal_error_answers_a_reference_and_keeps_its_detail_in_the_log() {
+        let secret = "rtcCommitScene failed in /srv/relume/scenes/private.glb";
+        let (a, b) = (ApiError::internal(secret), ApiError::internal(secret));
+        assert_eq!((a.status, a.error), (StatusCode::INTERNAL_SERVER_ERROR, "internal"));
+        for e in [&a, &b] {
+            assert!(!e.detail.contains("private.glb") && !e.detail.contains("rtc"), "{}", e.detail);
+            assert!(e.detail.contains("reference "), "{}", e.detail);
+        }
+        // Each answer names its own reference, so a log line can be found from it.
+        assert_ne!(a.detail, b.detail);
+        // Control: any other error passes its detail through, as a client fault should.
+        assert_eq!(ApiError::invalid(secret).detail, secret);
     }
 }

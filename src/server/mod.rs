@@ -117,19 +117,33 @@ async fn expire_idle(state: Arc<AppState>) {
     }
 }
 
-/// Counts every 4xx/5xx answer by its `error` code for `/metrics`.
-/// Names this node on every response (`X-Relume-Node`), errors and CORS answers included.
-async fn name_node(State(s): State<Shared>, req: Request, next: Next) -> Response {
+/// Stamps every answer, errors and CORS answers included, with the node that gave it
+/// (`X-Relume-Node`), `X-Content-Type-Options: nosniff` (a browser never guesses a type other
+/// than the one sent) and the [`CONTENT_SECURITY_POLICY`].
+async fn stamp_response(State(s): State<Shared>, req: Request, next: Next) -> Response {
     let mut resp = next.run(req).await;
+    let headers = resp.headers_mut();
     if let Ok(node) = axum::http::HeaderValue::from_str(&s.config.node) {
-        resp.headers_mut().insert(NODE_HEADER, node);
+        headers.insert(NODE_HEADER, node);
     }
+    headers.insert(axum::http::header::X_CONTENT_TYPE_OPTIONS, axum::http::HeaderValue::from_static("nosniff"));
+    headers.insert(
+        axum::http::header::CONTENT_SECURITY_POLICY,
+        axum::http::HeaderValue::from_static(CONTENT_SECURITY_POLICY),
+    );
     resp
 }
+
+/// The viewer loads its script, style, frames and socket from its own origin only, runs no
+/// inline script or style attribute, and shows frames as `blob:` images; nothing may frame it.
+pub const CONTENT_SECURITY_POLICY: &str = "default-src 'self'; script-src 'self'; style-src 'self'; \
+     img-src 'self' blob: data:; connect-src 'self'; object-src 'none'; base-uri 'none'; \
+     form-action 'self'; frame-ancestors 'none'";
 
 /// The response header naming the node that answered.
 pub const NODE_HEADER: &str = "x-relume-node";
 
+/// Counts every 4xx/5xx answer for `/metrics`, by a reason named after its status.
 async fn count_rejections(State(s): State<Shared>, req: Request, next: Next) -> Response {
     let resp = next.run(req).await;
     let status = resp.status();
@@ -222,7 +236,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         Some(c) => app.layer(c),
         None => app,
     };
-    app.layer(middleware::from_fn_with_state(state.clone(), name_node)).with_state(state)
+    app.layer(middleware::from_fn_with_state(state.clone(), stamp_response)).with_state(state)
 }
 
 /// CORS for the configured origins only; `None` (no CORS headers at all) when there are none.

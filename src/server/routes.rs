@@ -16,6 +16,7 @@ use axum::Json;
 use serde::de::DeserializeOwned;
 use serde::Deserialize;
 use std::sync::Arc;
+use std::time::Duration;
 
 pub type Shared = Arc<AppState>;
 
@@ -360,14 +361,31 @@ fn frame_format(file: &str) -> Result<ImageFormat, ApiError> {
     }
 }
 
+/// How many ticks a session can run in `wait` at `max_hz` at the most.
+fn ticks_within(wait: Duration, max_hz: f32) -> u64 {
+    (wait.as_secs_f64() * f64::from(max_hz)).ceil() as u64
+}
+
 /// The session's latest frame once it is at least tick `wanted` (any frame when `None`),
-/// waiting at most the server's frame wait.
+/// waiting at most the server's frame wait. A tick the session cannot reach within that wait,
+/// even ticking as fast as the server lets it, is refused at once (422 naming `tick`) instead
+/// of holding the connection for the whole wait.
 async fn wait_for_frame(
     s: &AppState,
     entry: &SessionEntry,
     wanted: Option<u64>,
 ) -> Result<Arc<PublishedFrame>, ApiError> {
     let mut frames = entry.handle.frames.clone();
+    if let Some(t) = wanted {
+        let next = frames.borrow().as_ref().map_or(0, |f| f.tick + 1);
+        let reachable = next.saturating_add(ticks_within(s.config.limits.frame_wait, s.config.limits.max_tick_hz));
+        if t > reachable {
+            return Err(ApiError::invalid(format!(
+                "tick: {t} cannot arrive within the frame wait ({:?}): the session's next tick is {next}, and it ticks at most {} times a second",
+                s.config.limits.frame_wait, s.config.limits.max_tick_hz
+            )));
+        }
+    }
     // Wait (bounded) for the wanted tick; the watch borrow ends inside this block.
     let waited = tokio::time::timeout(s.config.limits.frame_wait, async {
         frames

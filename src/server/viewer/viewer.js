@@ -20,10 +20,25 @@ function api(path, options = {}) {
 
 function status(text) { $("status").textContent = text; }
 
+// Builds an element with text content (never HTML from data: scene, object and animation names
+// come from uploaded files) and optional attributes and inline style properties.
+function el(tag, text, attrs = {}, style = {}) {
+  const node = document.createElement(tag);
+  if (text !== undefined) node.textContent = text;
+  for (const [k, v] of Object.entries(attrs)) node.setAttribute(k, v);
+  Object.assign(node.style, style);
+  return node;
+}
+
+// Replaces a <select>'s options: items are { value, text, title }.
+function setOptions(select, items) {
+  select.replaceChildren(...items.map((i) => el("option", i.text, Object.assign({ value: i.value }, i.title ? { title: i.title } : {}))));
+}
+
 async function loadScenes() {
   const { scenes } = await api("/v1/scenes");
   state.scenes = scenes;
-  $("scene").innerHTML = scenes.map((s) => `<option>${s.name}</option>`).join("");
+  setOptions($("scene"), scenes.map((s) => ({ value: s.name, text: s.name })));
   const preferred = scenes.find((s) => s.name === "merry-go-round") || scenes[0];
   if (preferred) $("scene").value = preferred.name;
 }
@@ -33,26 +48,38 @@ async function loadTechniques() {
   const list = await api("/v1/techniques");
   state.techniques = list.techniques;
   state.limits = list;
-  $("technique").innerHTML = list.techniques.map((t) => `<option value="${t.id}" title="${t.summary}">${t.id}</option>`).join("");
+  setOptions($("technique"), list.techniques.map((t) => ({ value: t.id, text: t.id, title: t.summary })));
   $("technique").value = "path";
   showParams();
 }
 
 function control(p, value) {
-  const attrs = `id="param-${p.name}" data-param="${p.name}" data-type="${p.type}"`;
+  const attrs = { id: `param-${p.name}`, "data-param": p.name, "data-type": p.type };
+  const label = el("label", undefined, { title: p.help });
   if (p.type === "choice") {
-    const options = p.choices.map((c) => `<option${c === String(value) ? " selected" : ""}>${c}</option>`).join("");
-    return `<label title="${p.help}">${p.name} <select ${attrs}>${options}</select></label>`;
+    const select = el("select", undefined, attrs);
+    select.append(...p.choices.map((c) => el("option", c)));
+    if (p.choices.includes(String(value))) select.value = String(value);
+    label.append(`${p.name} `, select);
+    return label;
   }
-  if (p.type === "boolean") return `<label title="${p.help}"><input ${attrs} type="checkbox"${value ? " checked" : ""}> ${p.name}</label>`;
+  if (p.type === "boolean") {
+    const box = el("input", undefined, Object.assign({ type: "checkbox" }, attrs));
+    box.checked = Boolean(value);
+    label.append(box, ` ${p.name}`);
+    return label;
+  }
   const max = p.name === "spp" ? Math.min(p.max, state.limits.max_spp_per_tick) : p.max;
   const step = p.type === "integer" ? 1 : "any";
-  return `<label title="${p.help}">${p.name} <input ${attrs} type="number" min="${p.min}" max="${max}" step="${step}" value="${value}"></label>`;
+  const input = el("input", undefined, Object.assign({ type: "number", min: p.min, max, step }, attrs));
+  input.value = value;
+  label.append(`${p.name} `, input);
+  return label;
 }
 
 function showParams() {
   const t = state.techniques.find((x) => x.id === $("technique").value);
-  $("params").innerHTML = t ? t.parameters.map((p) => control(p, t.defaults[p.name])).join("") : "";
+  $("params").replaceChildren(...(t ? t.parameters.map((p) => control(p, t.defaults[p.name])) : []));
 }
 
 function techniqueConfig() {
@@ -122,12 +149,15 @@ function showStats(s, dropped) {
     ["edits applied through (seq)", s.edits_applied_through],
     ["resident memory (MiB)", (s.detail.memory.total_bytes / 1048576).toFixed(1)],
   ];
-  $("stats").tBodies[0].innerHTML = rows.map(([k, v]) => `<tr><td>${k}</td><td>${v}</td></tr>`).join("");
+  $("stats").tBodies[0].replaceChildren(...rows.map(([k, v]) => {
+    const tr = el("tr");
+    tr.append(el("td", k), el("td", String(v)));
+    return tr;
+  }));
   const stages = ["apply_ms", "commit_ms", "update_ms", "render_ms", "resolve_ms", "denoise_ms"];
   const total = Math.max(s.times.total_ms, 1e-6);
-  $("stages").innerHTML = stages
-    .map((k) => `<div class="bar" style="width:${Math.max(1, (100 * s.times[k]) / total)}%">${k.replace("_ms", "")} ${s.times[k].toFixed(2)} ms</div>`)
-    .join("");
+  $("stages").replaceChildren(...stages.map((k) =>
+    el("div", `${k.replace("_ms", "")} ${s.times[k].toFixed(2)} ms`, { class: "bar" }, { width: `${Math.max(1, (100 * s.times[k]) / total)}%` })));
 }
 
 const STAGES = [["apply_ms", "#a78bfa"], ["commit_ms", "#f59e0b"], ["update_ms", "#ef4444"], ["render_ms", "#3b82f6"], ["resolve_ms", "#10b981"], ["denoise_ms", "#ec4899"]];
@@ -162,8 +192,11 @@ function drawPlots() {
   stacked($("plot-rays"), RAYS.map(([k, color]) => ({ color, values: h.map((s) => s.rays[k]) })));
   stacked($("plot-spp"), [{ color: "#10b981", values: h.map((s) => s.spp) }]);
   if (!$("legend").childElementCount) {
-    $("legend").innerHTML = [...STAGES, ...RAYS]
-      .map(([k, c]) => `<span><i style="background:${c}"></i>${k.replace("_ms", "")}</span>`).join("");
+    $("legend").replaceChildren(...[...STAGES, ...RAYS].map(([k, c]) => {
+      const span = el("span");
+      span.append(el("i", undefined, {}, { background: c }), k.replace("_ms", ""));
+      return span;
+    }));
   }
 }
 
@@ -207,11 +240,11 @@ async function start(glb) {
     state.scene = await api(`/v1/sessions/${s.id}/scene`);
     const c = state.scene.camera;
     state.extent = Math.hypot(c.position[0] - c.look_at[0], c.position[1] - c.look_at[1], c.position[2] - c.look_at[2]) * 0.6;
-    $("target").innerHTML = targets().map((t) => `<option value="${t.kind}/${t.name}">${t.kind} ${t.name}</option>`).join("");
+    setOptions($("target"), targets().map((t) => ({ value: `${t.kind}/${t.name}`, text: `${t.kind} ${t.name}` })));
     setSliders();
     const entry = glb ? null : state.scenes.find((x) => x.name === $("scene").value);
     const animations = (s.animations || []).length ? s.animations : entry ? entry.animations : [];
-    $("animation").innerHTML = animations.map((a) => `<option>${a}</option>`).join("");
+    setOptions($("animation"), animations.map((a) => ({ value: a, text: a })));
     connect(s.id);
     $("switch").disabled = false;
     status(`session ${s.id}` + (s.warnings ? ` — ${s.warnings.length} load warning(s): ${s.warnings.join("; ")}` : ""));
