@@ -235,6 +235,16 @@ async fn every_technique_is_bounded_before_it_allocates() {
     let (status, body) = post(&s, "/v1/sessions", big.clone()).await;
     assert_eq!(status, 429, "{body}");
     assert!(body["detail"].as_str().unwrap_or_default().contains("--server-memory"), "{body}");
+    // /metrics counts the refusal under its own code, not under another 429's (too_many_sessions,
+    // session_busy), and the 413s under theirs.
+    let m = s.http.get(s.url("/metrics")).send().await.unwrap().text().await.unwrap();
+    let count = |reason: &str| {
+        let key = format!("relume_rejected_requests_total{{reason=\"{reason}\"}} ");
+        m.lines().find_map(|l| l.strip_prefix(key.as_str())).map(|v| v.parse::<u64>().unwrap())
+    };
+    assert_eq!(count("server_memory_full"), Some(1), "{m}");
+    assert_eq!(count("too_large"), Some(4), "the four refused techniques above: {m}");
+    assert_eq!(count("too_many_sessions"), None, "{m}");
     let r = s.http.delete(s.url(&format!("/v1/sessions/{first}"))).send().await.expect("delete");
     assert_eq!(r.status().as_u16(), 204);
     let (status, body) = post(&s, "/v1/sessions", big).await;

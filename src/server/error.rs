@@ -6,6 +6,11 @@ use axum::response::{IntoResponse, Response};
 use axum::Json;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+/// The `error` code of an answer, kept on the response so `/metrics` counts rejections by
+/// code (`relume_rejected_requests_total{reason=CODE}`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ErrorCode(pub &'static str);
+
 /// An error answer. `error` is a stable machine-readable code; `detail` is for people.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct ApiError {
@@ -54,8 +59,10 @@ impl IntoResponse for ApiError {
     /// again: `Retry-After: 1`, time enough for a proxy to pick another node.
     fn into_response(self) -> Response {
         let unavailable = self.status == StatusCode::SERVICE_UNAVAILABLE;
+        let code = ErrorCode(self.error);
         let mut resp =
             (self.status, Json(ErrorBody { error: self.error.to_string(), detail: self.detail })).into_response();
+        resp.extensions_mut().insert(code);
         if unavailable {
             resp.headers_mut().insert(axum::http::header::RETRY_AFTER, axum::http::HeaderValue::from_static("1"));
         }

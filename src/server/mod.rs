@@ -143,28 +143,23 @@ pub const CONTENT_SECURITY_POLICY: &str = "default-src 'self'; script-src 'self'
 /// The response header naming the node that answered.
 pub const NODE_HEADER: &str = "x-relume-node";
 
-/// Counts every 4xx/5xx answer for `/metrics`, by a reason named after its status.
+/// Counts every 4xx/5xx answer for `/metrics` by its `error` code ([`error::ErrorCode`]), or,
+/// for the few the framework writes itself before any handler runs, by a name for its status.
 async fn count_rejections(State(s): State<Shared>, req: Request, next: Next) -> Response {
     let resp = next.run(req).await;
     let status = resp.status();
     if status.is_client_error() || status.is_server_error() {
-        let reason = match status {
-            StatusCode::BAD_REQUEST => "bad_request",
-            StatusCode::UNAUTHORIZED => "unauthorized",
-            StatusCode::NOT_FOUND => "not_found",
-            StatusCode::METHOD_NOT_ALLOWED => "method_not_allowed",
-            StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
-            StatusCode::REQUEST_TIMEOUT => "timeout",
-            StatusCode::CONFLICT => "session_failed",
-            StatusCode::GONE => "session_closed",
-            StatusCode::PAYLOAD_TOO_LARGE => "too_large",
-            StatusCode::UNPROCESSABLE_ENTITY => "invalid",
-            StatusCode::TOO_MANY_REQUESTS => "too_many_sessions",
-            StatusCode::MISDIRECTED_REQUEST => "host_not_allowed",
-            StatusCode::FORBIDDEN => "origin_not_allowed",
-            StatusCode::SERVICE_UNAVAILABLE => "unavailable",
-            _ if status.is_server_error() => "internal",
-            _ => "other",
+        let reason = match resp.extensions().get::<error::ErrorCode>() {
+            Some(code) => code.0,
+            None => match status {
+                StatusCode::BAD_REQUEST => "bad_request",
+                StatusCode::NOT_FOUND => "not_found",
+                StatusCode::METHOD_NOT_ALLOWED => "method_not_allowed",
+                StatusCode::PAYLOAD_TOO_LARGE => "too_large",
+                StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media_type",
+                _ if status.is_server_error() => "internal",
+                _ => "other",
+            },
         };
         s.metrics.reject(reason);
     }

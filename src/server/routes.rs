@@ -273,13 +273,7 @@ pub async fn post_edits(
     ApiJson(batch): ApiJson<EditBatch>,
 ) -> Result<Response, ApiError> {
     let entry = s.session(&id)?;
-    let limit = s.config.limits.max_edits_per_message;
-    if batch.edits.len() > limit {
-        return Err(ApiError::too_large(format!(
-            "edits: {} edits exceed the limit of {limit} per message",
-            batch.edits.len()
-        )));
-    }
+    s.config.limits.check_edit_count("edits", batch.edits.len())?;
     s.metrics.edits_received.fetch_add(batch.edits.len() as u64, std::sync::atomic::Ordering::Relaxed);
     let accepted = entry.handle.edits(batch.edits).await?;
     Ok((StatusCode::ACCEPTED, Json(accepted)).into_response())

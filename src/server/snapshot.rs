@@ -55,13 +55,7 @@ impl AppState {
                 return Err(ApiError::invalid(format!("snapshot.{field}: {value} exceeds {MAX_COUNTER}")));
             }
         }
-        let limit = self.config.limits.max_edits_per_message;
-        if snapshot.pending_edits.len() > limit {
-            return Err(ApiError::too_large(format!(
-                "snapshot.pending_edits: {} edits exceed the limit of {limit} per message",
-                snapshot.pending_edits.len()
-            )));
-        }
+        self.config.limits.check_edit_count("snapshot.pending_edits", snapshot.pending_edits.len())?;
         let root = &self.config.scenes_root;
         let [width, height] = snapshot.scene.camera.resolution;
         let scene = Scene::from_desc_within(snapshot.scene, root, root, &self.config.limits.scene_budget())

@@ -52,6 +52,16 @@ pub struct Limits {
 }
 
 impl Limits {
+    /// Refuses a batch of more than `max_edits_per_message` edits (413 naming `field`), the
+    /// one check for every path edits arrive by: HTTP, the WebSocket and a snapshot's queue.
+    pub fn check_edit_count(&self, field: &str, count: usize) -> Result<(), ApiError> {
+        let limit = self.max_edits_per_message;
+        if count > limit {
+            return Err(ApiError::too_large(format!("{field}: {count} edits exceed the limit of {limit} per message")));
+        }
+        Ok(())
+    }
+
     /// What a session's scene may hold, checked before any mesh is built.
     pub fn scene_budget(&self) -> SceneBudget {
         SceneBudget {
