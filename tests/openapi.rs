@@ -84,7 +84,9 @@ async fn routes_match_the_spec() {
             }
             let r = req.send().await.unwrap();
             let status = r.status().as_u16();
-            let body = r.text().await.unwrap_or_default();
+            // A stream's body lasts as long as its session: its status and headers are the answer.
+            let endless = status == 200 && path.ends_with("/stream.mjpeg");
+            let body = if endless { String::new() } else { r.text().await.unwrap_or_default() };
             if routes.contains(&(m.to_string(), path.clone())) {
                 assert!(
                     status != 405 && !body.contains("no such route"),

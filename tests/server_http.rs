@@ -142,6 +142,25 @@ async fn bearer_token_guards_v1_routes() {
     assert_eq!(s.http.get(s.url("/v1/scenes?token=sesame")).send().await.unwrap().status(), 401);
     let frame = s.http.get(s.url("/v1/sessions/nope/frame.png?token=ses%61me")).send().await.unwrap();
     assert_ne!(frame.status(), 401, "the percent-encoded token was refused");
+    // On a real session, the token is the query's only foreign field, and the frame answers.
+    let created = s
+        .http
+        .post(s.url("/v1/sessions"))
+        .header("authorization", "Bearer sesame")
+        .json(&small("cornell-box"))
+        .send()
+        .await
+        .unwrap();
+    let id = created.json::<Value>().await.unwrap()["id"].as_str().unwrap().to_string();
+    let frame = s.http.get(s.url(&format!("/v1/sessions/{id}/frame.png?tick=0&token=sesame"))).send();
+    let tick = s.http.post(s.url(&format!("/v1/sessions/{id}/tick"))).header("authorization", "Bearer sesame").send();
+    let (frame, tick) = tokio::join!(frame, tick);
+    assert_eq!(tick.unwrap().status(), 200);
+    let frame = frame.unwrap();
+    assert_eq!(frame.status(), 200, "{:?}", frame.text().await);
+    let frame =
+        s.http.get(s.url(&format!("/v1/sessions/{id}/frame.png?token=sesame&exposure=1"))).send().await.unwrap();
+    assert_eq!(frame.status(), 200, "{:?}", frame.text().await);
     let frame = s.http.get(s.url("/v1/sessions/nope/frame.png?token=wrong")).send().await.unwrap();
     assert_eq!(frame.status(), 401);
     s.shutdown().await.unwrap();
@@ -419,5 +438,56 @@ async fn a_frame_for_an_unreachable_tick_is_refused_at_once() {
     }
     // The bound's edge: tick 1 is reachable, so it is waited for until the frame wait ends.
     assert_eq!(get(1).await.unwrap().status(), 408);
+    s.shutdown().await.unwrap();
+}
+
+/// One multipart part at the start of `buf`: (its tick, its JPEG bytes, the bytes after it), or
+/// `None` while the part has not fully arrived.
+fn mjpeg_part(buf: &[u8]) -> Option<(u64, Vec<u8>, Vec<u8>)> {
+    let end = buf.windows(4).position(|w| w == b"\r\n\r\n")?;
+    let head = std::str::from_utf8(&buf[..end]).expect("part headers are text");
+    let boundary = format!("--{}\r\n", relume::server::mjpeg::BOUNDARY);
+    assert!(head.starts_with(boundary.trim_end()), "a part starts with {head:?}");
+    let field = |name: &str| {
+        head.lines().find_map(|l| l.strip_prefix(name)).map(|v| v.trim().parse::<u64>().expect(name)).expect(name)
+    };
+    let (len, tick) = (field("Content-Length:") as usize, field("X-Relume-Tick:"));
+    let body = end + 4;
+    (buf.len() >= body + len + 2).then(|| (tick, buf[body..body + len].to_vec(), buf[body + len + 2..].to_vec()))
+}
+
+/// `GET …/stream.mjpeg` (what an `<img>` tag, VLC or ffmpeg opens): each part is a JPEG of the
+/// session's size, ticks only go forward, and a reader that stops reading does not stop the
+/// session ticking.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_mjpeg_stream_sends_newest_frames_and_a_stalled_reader_costs_the_session_nothing() {
+    use tokio::io::AsyncWriteExt;
+    let s = TestServer::start(None, Limits::default()).await;
+    let id = s.session(json!({"scene": "cornell-box", "width": 48, "height": 32, "tick_hz": 60})).await;
+    let mut r = s.http.get(s.url(&format!("/v1/sessions/{id}/stream.mjpeg"))).send().await.unwrap();
+    assert_eq!(r.status(), 200);
+    let kind = r.headers()["content-type"].to_str().unwrap().to_string();
+    assert_eq!(kind, format!("multipart/x-mixed-replace; boundary={}", relume::server::mjpeg::BOUNDARY));
+    let (mut buf, mut ticks) = (Vec::new(), Vec::new());
+    while ticks.len() < 4 {
+        if let Some((tick, jpeg, rest)) = mjpeg_part(&buf) {
+            let image = image::load_from_memory_with_format(&jpeg, image::ImageFormat::Jpeg).expect("a valid JPEG");
+            assert_eq!((image.width(), image.height()), (48, 32), "tick {tick}");
+            ticks.push(tick);
+            buf = rest;
+            continue;
+        }
+        buf.extend_from_slice(&r.chunk().await.unwrap().expect("the stream ended early"));
+    }
+    assert!(ticks.windows(2).all(|w| w[0] < w[1]), "ticks went back or repeated: {ticks:?}");
+    // A reader that asks for the stream and never reads holds a connection, nothing more: the
+    // session goes on ticking at its rate.
+    let mut stalled = tokio::net::TcpStream::connect(s.addr).await.unwrap();
+    let ask = format!("GET /v1/sessions/{id}/stream.mjpeg HTTP/1.1\r\nHost: 127.0.0.1\r\n\r\n");
+    stalled.write_all(ask.as_bytes()).await.unwrap();
+    let later = ticks.last().unwrap() + 30;
+    let frame = s.http.get(s.url(&format!("/v1/sessions/{id}/frame.jpg?tick={later}"))).send().await.unwrap();
+    assert_eq!(frame.status(), 200, "the session stopped ticking behind a stalled stream reader");
+    drop((stalled, r));
     s.shutdown().await.unwrap();
 }

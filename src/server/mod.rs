@@ -14,6 +14,7 @@ pub mod encoded;
 pub mod error;
 mod listen;
 pub mod metrics;
+pub mod mjpeg;
 pub mod protocol;
 pub mod routes;
 pub mod snapshot;
@@ -38,8 +39,9 @@ use tower_http::timeout::TimeoutLayer;
 
 /// Rejects `/v1` requests without the configured bearer token. The token comes in
 /// `Authorization: Bearer <token>` (the scheme in any case); `?token=` (percent-decoded) is
-/// accepted only on the GETs a browser opens without setting headers: the WebSocket and
-/// frames. Tokens are compared in constant time.
+/// accepted only on the GETs a browser opens without setting headers: the WebSocket, frames
+/// and the MJPEG stream, and is taken out of the query before the handler reads it. Tokens are
+/// compared in constant time.
 async fn require_token(State(s): State<Shared>, req: Request, next: Next) -> Result<Response, ApiError> {
     if let Some(token) = &s.config.token {
         let matches = |t: &[u8]| bool::from(subtle::ConstantTimeEq::ct_eq(t, token.as_bytes()));
@@ -51,7 +53,9 @@ async fn require_token(State(s): State<Shared>, req: Request, next: Next) -> Res
             .is_some_and(|(scheme, t)| scheme.eq_ignore_ascii_case("bearer") && matches(t.trim().as_bytes()));
         let path = req.uri().path();
         let browser_get = req.method() == axum::http::Method::GET
-            && (path.ends_with("/ws") || path.rsplit('/').next().is_some_and(|f| f.starts_with("frame.")));
+            && (path.ends_with("/ws")
+                || path.ends_with("/stream.mjpeg")
+                || path.rsplit('/').next().is_some_and(|f| f.starts_with("frame.")));
         let query_ok = browser_get
             && req
                 .uri()
@@ -64,11 +68,33 @@ async fn require_token(State(s): State<Shared>, req: Request, next: Next) -> Res
             return Err(ApiError::new(
                 StatusCode::UNAUTHORIZED,
                 "unauthorized",
-                "this server requires 'Authorization: Bearer <token>' (or ?token= on WebSocket and frame URLs)",
+                "this server requires 'Authorization: Bearer <token>' (or ?token= on WebSocket, frame and stream URLs)",
             ));
+        }
+        if query_ok {
+            let mut req = req;
+            without_token(&mut req);
+            return Ok(next.run(req).await);
         }
     }
     Ok(next.run(req).await)
+}
+
+/// Drops `token=` from an authorised request's query, so a handler's query parameters (which
+/// refuse unknown fields) never see it.
+fn without_token(req: &mut Request) {
+    let uri = req.uri();
+    let Some(query) = uri.query() else { return };
+    let kept: Vec<&str> = query.split('&').filter(|kv| !kv.starts_with("token=")).collect();
+    let path_and_query =
+        if kept.is_empty() { uri.path().to_string() } else { format!("{}?{}", uri.path(), kept.join("&")) };
+    let mut parts = uri.clone().into_parts();
+    if let Ok(pq) = path_and_query.parse() {
+        parts.path_and_query = Some(pq);
+        if let Ok(uri) = axum::http::Uri::from_parts(parts) {
+            *req.uri_mut() = uri;
+        }
+    }
 }
 
 /// Refuses a `Host` that is not an IP literal, `localhost` or a configured name with 421: a
@@ -210,6 +236,7 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/sessions/{id}/snapshot", get(routes::get_snapshot))
         .route("/sessions/{id}/pick", get(routes::pick))
         .route("/sessions/{id}/ws", get(ws::upgrade))
+        .route("/sessions/{id}/stream.mjpeg", get(mjpeg::stream))
         .route("/sessions/{id}/{file}", get(routes::get_frame))
         .layer(middleware::from_fn_with_state(state.clone(), require_token));
     let app = Router::new()
