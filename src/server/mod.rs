@@ -42,7 +42,7 @@ use tower_http::timeout::TimeoutLayer;
 /// accepted only on the GETs a browser opens without setting headers: the WebSocket, frames
 /// and the MJPEG stream, and is taken out of the query before the handler reads it. Tokens are
 /// compared in constant time.
-async fn require_token(State(s): State<Shared>, req: Request, next: Next) -> Result<Response, ApiError> {
+async fn require_token(State(s): State<Shared>, mut req: Request, next: Next) -> Result<Response, ApiError> {
     if let Some(token) = &s.config.token {
         let matches = |t: &[u8]| bool::from(subtle::ConstantTimeEq::ct_eq(t, token.as_bytes()));
         let header_ok = req
@@ -72,9 +72,7 @@ async fn require_token(State(s): State<Shared>, req: Request, next: Next) -> Res
             ));
         }
         if query_ok {
-            let mut req = req;
             without_token(&mut req);
-            return Ok(next.run(req).await);
         }
     }
     Ok(next.run(req).await)
