@@ -230,15 +230,16 @@ async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, by
     };
     let outcome: Result<Option<ServerMessage>, ApiError> =
         match message {
-            ClientMessage::Edits { edits } => match state.config.limits.check_edit_count("edits", edits.len()) {
-                Err(e) => Err(e),
-                Ok(()) => {
+            ClientMessage::Edits { edits } => {
+                if let Err(e) = state.config.limits.check_edit_count("edits", edits.len()) {
+                    Err(e)
+                } else {
                     state.metrics.edits_received.fetch_add(edits.len() as u64, Ordering::Relaxed);
                     entry.handle.edits(edits).await.map(|a| {
                         Some(ServerMessage::EditsAccepted { queued: a.queued, pending: a.pending, seq: a.seq })
                     })
                 }
-            },
+            }
             // The frame and stats arrive through the subscription once the tick publishes.
             ClientMessage::Tick => entry.handle.tick().await.map(|_| None),
             ClientMessage::Subscribe { frames, stats, every, denoised } => {
