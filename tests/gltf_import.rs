@@ -200,12 +200,13 @@ fn bad_files_are_refused_naming_the_part() {
             "nodes[0] ('n0').matrix",
         ),
         (
-            "sun",
+            "sun wider than a sun",
             Box::new(|d: &mut Value| {
                 d["extensions"] = json!({"KHR_lights_punctual": {"lights": [{"type": "directional"}]}});
                 d["nodes"][0]["extensions"] = json!({"KHR_lights_punctual": {"light": 0}});
+                d["nodes"][0]["extras"] = json!({"relume": {"angle_deg": 45}});
             }),
-            "directional",
+            "angle_deg",
         ),
         ("cycle", Box::new(|d: &mut Value| d["nodes"][1]["children"] = json!([1])), "nodes[1]"),
         ("short buffer", Box::new(|d: &mut Value| d["buffers"][0]["byteLength"] = json!(1 << 20)), "buffers[0]"),

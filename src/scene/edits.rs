@@ -46,6 +46,11 @@ pub enum Edit {
     },
     /// Replaces a material's parameters.
     Material { name: String, material: Material },
+    /// Changes the environment's radiance (the scene must have an environment).
+    Environment {
+        #[serde(default)]
+        radiance: Option<crate::core::Rgb>,
+    },
 }
 
 /// An axis-aligned box in world space.
@@ -151,6 +156,7 @@ pub fn coalesce(edits: Vec<Edit>) -> (Vec<(usize, Edit)>, usize) {
             Edit::Light { name, .. } => format!("light/{name}"),
             Edit::Camera { .. } => "camera".to_string(),
             Edit::Material { name, .. } => format!("material/{name}"),
+            Edit::Environment { .. } => "environment".to_string(),
         };
         let next = match (merged.remove(&key), e) {
             (Some((_, Edit::Light { name, transform: t0, emitter: e0 })), Edit::Light { transform, emitter, .. }) => {
@@ -165,6 +171,9 @@ pub fn coalesce(edits: Vec<Edit>) -> (Vec<(usize, Edit)>, usize) {
                 up: up.or(u0),
                 vfov_deg: vfov_deg.or(v0),
             },
+            (Some((_, Edit::Environment { radiance: r0 })), Edit::Environment { radiance }) => {
+                Edit::Environment { radiance: radiance.or(r0) }
+            }
             (previous, e) => {
                 if previous.is_none() {
                     order.push(key.clone());
@@ -216,6 +225,14 @@ fn validate_coalesced(scene: &Scene, edits: &[(usize, Edit)]) -> Result<(), Scen
             Edit::Light { name, transform, emitter } => {
                 let idx = scene.light_index(name).ok_or_else(|| err(i, ".name", format!("unknown light '{name}'")))?;
                 if let Some(t) = transform {
+                    let directional = matches!(scene.desc().lights[idx].emitter, EmitterDesc::Directional { .. });
+                    if directional && *t != Trs::default() {
+                        return Err(err(
+                            i,
+                            ".transform",
+                            format!("light '{name}' is directional and has no placement; edit its emitter's direction"),
+                        ));
+                    }
                     if !scene.lights[idx].dynamic && *t != scene.desc().lights[idx].transform {
                         return Err(err(
                             i,
@@ -264,6 +281,19 @@ fn validate_coalesced(scene: &Scene, edits: &[(usize, Edit)]) -> Result<(), Scen
                     .ok_or_else(|| err(i, ".name", format!("unknown material '{name}'")))?;
                 validate_material("material", material).map_err(|e| reindex(i, e))?;
             }
+            Edit::Environment { radiance } => {
+                if scene.environment_light().is_none() {
+                    return Err(err(
+                        i,
+                        ".target",
+                        "the scene has no environment; give it one (\"environment\") when the session is created",
+                    ));
+                }
+                if let Some(radiance) = radiance {
+                    let env = super::EnvironmentDesc { radiance: *radiance };
+                    super::load::validate_environment("environment", &env).map_err(|e| reindex(i, e))?;
+                }
+            }
         }
     }
     Ok(())
@@ -300,6 +330,7 @@ pub fn apply(scene: &mut Scene, edits: Vec<Edit>) -> Result<SceneDelta, SceneErr
                 }
                 changed
             }
+            Edit::Environment { radiance } => apply_environment(scene, radiance, &mut delta),
         };
         if !changed {
             delta.unchanged += 1;
@@ -362,12 +393,42 @@ fn apply_light(
     true
 }
 
+/// Changes the environment's radiance (validated: the scene has one); returns false if it
+/// stays the same. A change is a light edit of the environment, a rescale where every old
+/// channel is positive.
+fn apply_environment(scene: &mut Scene, radiance: Option<crate::core::Rgb>, delta: &mut SceneDelta) -> bool {
+    let (Some(idx), Some(old)) = (scene.environment_light(), scene.desc().environment) else { return false };
+    let new = super::EnvironmentDesc { radiance: radiance.unwrap_or(old.radiance) };
+    if new == old {
+        return false;
+    }
+    scene.set_environment(new);
+    let rescale = light::channel_ratio(old.radiance, new.radiance);
+    delta.lights.push(LightChange {
+        light: idx,
+        old_world_from_object: Affine3A::IDENTITY,
+        moved: false,
+        emission_changed: true,
+        rescale,
+    });
+    true
+}
+
 /// World bounds of light `idx` (a point for point and spot lights).
+/// For a light from outside, a box that every shadow ray towards it from inside the scene's
+/// sphere (centre c, radius r) ends in: around the sun, the disc of radius r (widened by its cone)
+/// two radii out against its travel; for the environment, the sphere grown to three radii.
 pub fn light_bounds(scene: &Scene, idx: usize) -> Aabb {
+    let cube = |c: Vec3, half: f32| Aabb { min: c - Vec3::splat(half), max: c + Vec3::splat(half) };
     match &scene.lights[idx].geometry {
         super::LightGeometry::Area { triangles, .. } => Aabb::of_points(triangles.iter().flatten().copied()),
-        _ => {
-            let p = scene.desc().lights[idx].transform.translation();
+        super::LightGeometry::Directional { travel, cos_max, outside, .. } => {
+            let tan = (1.0 - cos_max * cos_max).max(0.0).sqrt() / cos_max;
+            cube(outside.center - *travel * (2.0 * outside.radius), outside.radius * (1.0 + 3.0 * tan))
+        }
+        super::LightGeometry::Environment { outside, .. } => cube(outside.center, 3.0 * outside.radius),
+        super::LightGeometry::Point { .. } | super::LightGeometry::Spot { .. } => {
+            let p = scene.light_position(idx);
             Aabb { min: p, max: p }
         }
     }

@@ -8,6 +8,17 @@
 //! mesh light such as a glTF export of one) is sampled directly over its two edges, with no
 //! choice of triangle: the same density, for 1.01–1.17× `path`'s samples/s on the Cornell box
 //! (`docs/benchmarks.md`).
+//!
+//! Lights from outside (pbrt-v4's infinite lights): a directional light (the sun: irradiance E in
+//! W/m² on a surface facing it, from a cone of half-angle θ_max, or a delta direction when
+//! θ_max = 0) and a uniform environment (radiance L from every direction). They have no surface:
+//! next-event estimation samples their directions (the sun's cone uniformly, the environment
+//! cosine-weighted about the receiver's normal), rays that leave the scene see them
+//! ([`LightGeometry::escaped`]), and emitted rays start on a disc of the scene's bounding
+//! sphere's radius r facing the sampled direction, outside the sphere, so their power is E·πr²
+//! (sun) and L·4π·πr² (environment).
+//! The sun's cone carries radiance E / (π sin²θ_max), which gives exactly E on a facing surface.
+//! The sphere is taken at load: an object moved out of it gets no photons from outside.
 use super::model::{EmitterDesc, LightDesc};
 use super::shapes::Mesh;
 use crate::core::sampling::{self, DiscreteDistribution};
@@ -40,6 +51,61 @@ pub enum LightGeometry {
         by_area: DiscreteDistribution,
         parallelogram: Option<[Vec3; 3]>,
     },
+    /// A distant light travelling along unit `travel`; `cos_max` is 1 for a delta direction.
+    Directional {
+        travel: Vec3,
+        irradiance: Rgb,
+        cos_max: f32,
+        outside: Outside,
+    },
+    /// Uniform radiance from every direction.
+    Environment {
+        radiance: Rgb,
+        outside: Outside,
+    },
+}
+
+/// The scene's bounding sphere as lights from outside see it: their emitted rays start on a
+/// disc of radius `radius` just outside it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Outside {
+    pub center: Vec3,
+    pub radius: f32,
+}
+
+impl Outside {
+    /// The sphere around `points` (the box's circumscribed one, at least 1 mm across).
+    pub fn around(points: impl IntoIterator<Item = Vec3>) -> Outside {
+        let b = super::edits::Aabb::of_points(points);
+        if b.is_empty() {
+            return Outside { center: Vec3::ZERO, radius: 1.0 };
+        }
+        Outside { center: 0.5 * (b.min + b.max), radius: (0.5 * (b.max - b.min).length()).max(1e-3) }
+    }
+
+    /// A distance from `p` along any direction that lies beyond the sphere: where a shadow ray
+    /// towards a light from outside may stop.
+    fn beyond(&self, p: Vec3) -> f32 {
+        2.0 * ((p - self.center).length() + self.radius)
+    }
+
+    fn disc_area(&self) -> f32 {
+        PI * self.radius * self.radius
+    }
+
+    /// A ray travelling along `toward` from a point uniform on the disc facing it outside the
+    /// sphere.
+    fn ray_in(&self, toward: Vec3, u: Vec2) -> Vec3 {
+        let d = sampling::concentric_disc(u) * self.radius;
+        let frame = crate::core::ShadingFrame::from_normal(toward);
+        self.center - toward * self.radius + frame.to_world(Vec3::new(d.x, d.y, 0.0))
+    }
+}
+
+/// The radiance of a sun of irradiance `e` and cone `cos_max` < 1: E / (π sin²θ_max), with
+/// sin² as (1 − cos)(1 + cos): 1 − cos is exact in f32, where 1 − cos² loses the sun's 0.53°.
+fn sun_radiance(e: Rgb, cos_max: f32) -> Rgb {
+    e / (PI * (1.0 - cos_max) * (1.0 + cos_max))
 }
 
 /// An incident-radiance sample towards a light.
@@ -79,9 +145,18 @@ pub fn emission_rescale(old: &EmitterDesc, new: &EmitterDesc) -> Option<Rgb> {
             EmitterDesc::Mesh { radiance: a, positions: p, indices: i },
             EmitterDesc::Mesh { radiance: b, positions: p2, indices: i2 },
         ) if p == p2 && i == i2 => (a, b),
+        (
+            EmitterDesc::Directional { irradiance: a, direction: d, angle_deg: g },
+            EmitterDesc::Directional { irradiance: b, direction: d2, angle_deg: g2 },
+        ) if d == d2 && g == g2 => (a, b),
         _ => return None,
     };
-    (a.min_component() > 0.0).then(|| Rgb::new(b.r / a.r, b.g / a.g, b.b / a.b))
+    channel_ratio(*a, *b)
+}
+
+/// The per-channel factor `new/old`, when every channel of `old` is positive.
+pub fn channel_ratio(old: Rgb, new: Rgb) -> Option<Rgb> {
+    (old.min_component() > 0.0).then(|| Rgb::new(new.r / old.r, new.g / old.g, new.b / old.b))
 }
 
 /// The object-space mesh of a validated light with a shape (`None` for point and spot
@@ -95,7 +170,7 @@ pub fn emitter_mesh(emitter: &EmitterDesc) -> Option<Mesh> {
             mesh.drop_degenerate();
             Some(mesh)
         }
-        EmitterDesc::Point { .. } | EmitterDesc::Spot { .. } => None,
+        EmitterDesc::Point { .. } | EmitterDesc::Spot { .. } | EmitterDesc::Directional { .. } => None,
     }
 }
 
@@ -142,12 +217,18 @@ fn smoothstep(x: f32, lo: f32, hi: f32) -> f32 {
 }
 
 impl LightGeometry {
-    /// World-space geometry of a validated light description.
-    pub fn new(desc: &LightDesc, mesh: Option<&Mesh>) -> LightGeometry {
+    /// World-space geometry of a validated light description; `outside` is the scene's sphere.
+    pub fn new(desc: &LightDesc, mesh: Option<&Mesh>, outside: Outside) -> LightGeometry {
         let xf: Affine3A = desc.transform.world_from_object();
         let position = desc.transform.translation();
         match (&desc.emitter, mesh) {
             (EmitterDesc::Point { intensity }, _) => LightGeometry::Point { position, intensity: *intensity },
+            (EmitterDesc::Directional { direction, irradiance, angle_deg }, _) => LightGeometry::Directional {
+                travel: Vec3::from(*direction).normalize_or(Vec3::NEG_Y),
+                irradiance: *irradiance,
+                cos_max: if *angle_deg > 0.0 { (0.5 * angle_deg).to_radians().cos().min(1.0 - 1e-7) } else { 1.0 },
+                outside,
+            },
             (EmitterDesc::Spot { intensity, cone_deg, falloff_start_deg }, _) => LightGeometry::Spot {
                 position,
                 axis: (desc.transform.rotation() * Vec3::Z).normalize(),
@@ -196,6 +277,45 @@ impl LightGeometry {
                 *intensity * (2.0 * PI * (1.0 - 0.5 * (cos_falloff_start + cos_falloff_end)))
             }
             LightGeometry::Area { radiance, area, .. } => *radiance * (PI * area),
+            LightGeometry::Directional { .. } | LightGeometry::Environment { .. } => self.emission_weight(Vec3::Z),
+        }
+    }
+
+    /// The environment as a light: uniform `radiance` around `outside`.
+    pub fn environment(radiance: Rgb, outside: Outside) -> LightGeometry {
+        LightGeometry::Environment { radiance, outside }
+    }
+
+    /// A light from outside the scene (no surface, seen by rays that leave it).
+    pub fn is_infinite(&self) -> bool {
+        matches!(self, LightGeometry::Directional { .. } | LightGeometry::Environment { .. })
+    }
+
+    /// Radiance arriving along a ray that leaves the scene in unit direction `dir` (black for
+    /// lights with a surface and for a delta sun).
+    pub fn escaped(&self, dir: Vec3) -> Rgb {
+        match self {
+            LightGeometry::Environment { radiance, .. } => *radiance,
+            LightGeometry::Directional { travel, irradiance, cos_max, .. }
+                if *cos_max < 1.0 && -dir.dot(*travel) >= *cos_max =>
+            {
+                sun_radiance(*irradiance, *cos_max)
+            }
+            _ => Rgb::BLACK,
+        }
+    }
+
+    /// Solid-angle density with which [`LightGeometry::sample_incident`] picks unit direction
+    /// `wi` of a light from outside for a receiver whose side is `side` (0 for the rest and for
+    /// a delta sun).
+    pub fn pdf_direction(&self, wi: Vec3, side: Vec3) -> f32 {
+        match self {
+            LightGeometry::Environment { .. } if side == Vec3::ZERO => sampling::UNIFORM_SPHERE_PDF,
+            LightGeometry::Environment { .. } => sampling::cosine_hemisphere_pdf(wi.dot(side).max(0.0)),
+            LightGeometry::Directional { travel, cos_max, .. } if *cos_max < 1.0 && -wi.dot(*travel) >= *cos_max => {
+                sampling::uniform_cone_pdf(*cos_max)
+            }
+            _ => 0.0,
         }
     }
 
@@ -209,12 +329,21 @@ impl LightGeometry {
         }
     }
 
+    /// The light's next-event samples are deltas (a point, a spot, a sun of angle 0): BSDF
+    /// sampling never finds them.
     pub fn is_delta(&self) -> bool {
-        !matches!(self, LightGeometry::Area { .. })
+        match self {
+            LightGeometry::Area { .. } | LightGeometry::Environment { .. } => false,
+            LightGeometry::Directional { cos_max, .. } => *cos_max >= 1.0,
+            LightGeometry::Point { .. } | LightGeometry::Spot { .. } => true,
+        }
     }
 
-    /// Samples radiance arriving at `p`. `None` when nothing can arrive (back side, zero area).
-    pub fn sample_incident(&self, p: Vec3, u: Vec2) -> Option<IncidentSample> {
+    /// Samples radiance arriving at `p`, a point on a surface whose unit normal on the receiving
+    /// side is `side` (zero when unknown). `None` when nothing can arrive (back side, zero
+    /// area). The environment is sampled cosine-weighted about `side` (uniformly over the sphere
+    /// without one), which makes a diffuse receiver's estimate exact where nothing occludes it.
+    pub fn sample_incident(&self, p: Vec3, side: Vec3, u: Vec2) -> Option<IncidentSample> {
         match self {
             LightGeometry::Point { position, intensity } => {
                 let d = *position - p;
@@ -246,6 +375,33 @@ impl LightGeometry {
                     li: *intensity * (falloff / dist2),
                     pdf: 1.0,
                     delta: true,
+                    normal: Vec3::ZERO,
+                })
+            }
+            LightGeometry::Directional { travel, irradiance, cos_max, outside } => {
+                let (wi, li, pdf) = if *cos_max >= 1.0 {
+                    (-*travel, *irradiance, 1.0)
+                } else {
+                    let local = sampling::uniform_cone(u, *cos_max);
+                    let wi = crate::core::ShadingFrame::from_normal(-*travel).to_world(local);
+                    (wi, sun_radiance(*irradiance, *cos_max), sampling::uniform_cone_pdf(*cos_max))
+                };
+                let delta = *cos_max >= 1.0;
+                Some(IncidentSample { wi, dist: outside.beyond(p), li, pdf, delta, normal: Vec3::ZERO })
+            }
+            LightGeometry::Environment { radiance, outside } => {
+                let wi = if side == Vec3::ZERO {
+                    sampling::uniform_sphere(u)
+                } else {
+                    crate::core::ShadingFrame::from_normal(side).to_world(sampling::cosine_hemisphere(u))
+                };
+                let pdf = self.pdf_direction(wi, side);
+                (pdf > 0.0).then(|| IncidentSample {
+                    wi,
+                    dist: outside.beyond(p),
+                    li: *radiance,
+                    pdf,
+                    delta: false,
                     normal: Vec3::ZERO,
                 })
             }
@@ -310,6 +466,19 @@ impl LightGeometry {
                 // Off the light's surface, so the ray cannot hit its own light.
                 (crate::core::offset_ray_origin(on_light, n), dir)
             }
+            LightGeometry::Directional { travel, cos_max, outside, .. } => {
+                let dir = if *cos_max >= 1.0 {
+                    *travel
+                } else {
+                    let local = sampling::uniform_cone(u_dir, *cos_max);
+                    crate::core::ShadingFrame::from_normal(*travel).to_world(local)
+                };
+                (outside.ray_in(dir, u_pos), dir)
+            }
+            LightGeometry::Environment { outside, .. } => {
+                let dir = -sampling::uniform_sphere(u_dir);
+                (outside.ray_in(dir, u_pos), dir)
+            }
         };
         let weight = self.emission_weight(dir);
         (!weight.is_black()).then_some((origin, dir, weight))
@@ -317,7 +486,9 @@ impl LightGeometry {
 
     /// `flux / pdf` of a ray [`LightGeometry::sample_emission`] emits along `dir`: uniform
     /// sphere `I·4π` for points; `I·falloff / pdf_cone` for spots; `L cosθ / (pdf_A · pdf_ω) =
-    /// L cosθ / ((1/A) · cosθ/π) = L π A` for area lights (`dir` on the emitting side).
+    /// L cosθ / ((1/A) · cosθ/π) = L π A` for area lights (`dir` on the emitting side);
+    /// `E·πr²` for a delta sun, `L·πr²/pdf_cone` for a sun of angle θ_max, `L·πr²·4π` for the
+    /// environment (each ray crosses its disc of area πr² square on).
     pub fn emission_weight(&self, dir: Vec3) -> Rgb {
         match self {
             LightGeometry::Point { intensity, .. } => *intensity / sampling::UNIFORM_SPHERE_PDF,
@@ -326,6 +497,15 @@ impl LightGeometry {
                 *intensity * (falloff / sampling::uniform_cone_pdf(*cos_falloff_end))
             }
             LightGeometry::Area { radiance, area, .. } => *radiance * (PI * area),
+            LightGeometry::Directional { irradiance, cos_max, outside, .. } if *cos_max >= 1.0 => {
+                *irradiance * outside.disc_area()
+            }
+            LightGeometry::Directional { irradiance, cos_max, outside, .. } => {
+                sun_radiance(*irradiance, *cos_max) * (outside.disc_area() / sampling::uniform_cone_pdf(*cos_max))
+            }
+            LightGeometry::Environment { radiance, outside } => {
+                *radiance * (outside.disc_area() / sampling::UNIFORM_SPHERE_PDF)
+            }
         }
     }
 
@@ -336,6 +516,9 @@ impl LightGeometry {
         match self {
             LightGeometry::Area { area, .. } if *area > 0.0 => 1.0 / area,
             LightGeometry::Area { .. } => 0.0,
+            LightGeometry::Directional { outside, .. } | LightGeometry::Environment { outside, .. } => {
+                1.0 / outside.disc_area()
+            }
             _ => 1.0,
         }
     }
@@ -353,6 +536,9 @@ impl LightGeometry {
                 }
             }
             LightGeometry::Area { .. } => sampling::cosine_hemisphere_pdf(n.dot(dir)),
+            LightGeometry::Directional { .. } | LightGeometry::Environment { .. } => {
+                self.pdf_direction(-dir, Vec3::ZERO)
+            }
         }
     }
 

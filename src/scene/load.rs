@@ -89,7 +89,7 @@ pub fn count_triangles(desc: &SceneDesc, scene_dir: &Path, root: &Path) -> Resul
             EmitterDesc::Rect { .. } => 2,
             EmitterDesc::Disc { segments, .. } => Mesh::disc_triangles(*segments),
             EmitterDesc::Mesh { indices, .. } => indices.len() as u64,
-            EmitterDesc::Point { .. } | EmitterDesc::Spot { .. } => 0,
+            EmitterDesc::Point { .. } | EmitterDesc::Spot { .. } | EmitterDesc::Directional { .. } => 0,
         };
     }
     Ok(total)
@@ -307,7 +307,48 @@ pub fn validate_emitter(field: &str, e: &EmitterDesc) -> Result<(), SceneError> 
             }
             Ok(())
         }
+        EmitterDesc::Directional { direction, irradiance, angle_deg } => {
+            check_emission(&format!("{field}.irradiance"), *irradiance)?;
+            check_finite(&format!("{field}.direction"), direction)?;
+            if Vec3::from(*direction).length() < 1e-6 {
+                return Err(invalid(format!("{field}.direction"), "must not be zero: it is the way the light travels"));
+            }
+            check_finite(&format!("{field}.angle_deg"), &[*angle_deg])?;
+            if !(0.0..=MAX_SUN_ANGLE_DEG).contains(angle_deg) {
+                return Err(invalid(
+                    format!("{field}.angle_deg"),
+                    format!("the angular diameter must lie in [0, {MAX_SUN_ANGLE_DEG}] (the sun's is 0.53)"),
+                ));
+            }
+            Ok(())
+        }
     }
+}
+
+/// The widest directional light, in degrees of angular diameter: wider than this it is an
+/// environment, not a sun.
+pub const MAX_SUN_ANGLE_DEG: f32 = 30.0;
+
+/// Refuses an environment with a negative or non-finite radiance.
+pub fn validate_environment(field: &str, env: &EnvironmentDesc) -> Result<(), SceneError> {
+    check_emission(&format!("{field}.radiance"), env.radiance)
+}
+
+/// The radiance that lights a scene with no light at all.
+pub const LIGHTLESS_ENVIRONMENT: f32 = 1.0;
+
+/// A scene with no light and no environment gets a uniform white environment (as a glTF viewer
+/// lights a model), with a warning that says so and how to change it; any other scene is left as
+/// it is.
+pub fn light_the_lightless(desc: &mut SceneDesc) -> Option<String> {
+    if !desc.lights.is_empty() || desc.environment.is_some() {
+        return None;
+    }
+    desc.environment = Some(EnvironmentDesc { radiance: crate::core::Rgb::splat(LIGHTLESS_ENVIRONMENT) });
+    Some(format!(
+        "the scene has no light: it is lit by a uniform environment of radiance {LIGHTLESS_ENVIRONMENT} \
+         (give it lights, or an \"environment\" such as {{\"radiance\": [0.5, 0.5, 0.5]}}, to change this)"
+    ))
 }
 
 /// An inline triangle list as a mesh; errors name the field under `field`.
@@ -457,12 +498,21 @@ pub fn validate_and_build_meshes(
         check_placement(&format!("{field}.transform"), &bounds, &o.transform)?;
         meshes.push((mesh, bounds));
     }
+    if let Some(env) = &desc.environment {
+        validate_environment("environment", env)?;
+    }
     let mut light_names = std::collections::HashSet::new();
     for (i, l) in desc.lights.iter().enumerate() {
         let field = format!("lights[{i}]");
         check_name(&field, "light", &l.name, &mut light_names)?;
         validate_emitter(&format!("{field}.emitter"), &l.emitter)?;
         validate_trs(&format!("{field}.transform"), &l.transform)?;
+        if matches!(l.emitter, EmitterDesc::Directional { .. }) && l.transform != Trs::default() {
+            return Err(invalid(
+                format!("{field}.transform"),
+                "a directional light has no placement: give its emitter's direction instead",
+            ));
+        }
         if let Some(mesh) = super::light::emitter_mesh(&l.emitter) {
             check_placement(&format!("{field}.transform"), &mesh.bounds(), &l.transform)?;
         }

@@ -20,10 +20,10 @@ pub mod shapes;
 
 pub use accel::SceneAccel;
 pub use camera::Camera;
-pub use light::{IncidentSample, LightGeometry};
+pub use light::{IncidentSample, LightGeometry, Outside};
 pub use load::{SceneBudget, SceneError};
 pub use material::{Normals, Transport};
-pub use model::{CameraDesc, EmitterDesc, LightDesc, Material, ObjectDesc, SceneDesc, ShapeDesc, Trs};
+pub use model::{CameraDesc, EmitterDesc, EnvironmentDesc, LightDesc, Material, ObjectDesc, SceneDesc, ShapeDesc, Trs};
 pub use shapes::Mesh;
 
 use crate::core::sampling::DiscreteDistribution;
@@ -84,7 +84,13 @@ pub struct Scene {
     pub materials: Vec<Material>,
     pub material_names: Vec<String>,
     pub objects: Vec<SceneObject>,
+    /// The description's lights in its order, then the environment (if the scene has one).
     pub lights: Vec<SceneLight>,
+    /// Indices into `lights` of the lights from outside (directional lights, the environment),
+    /// which rays leaving the scene see.
+    pub infinite_lights: Vec<usize>,
+    /// The scene's bounding sphere at load, which lights from outside emit into.
+    pub outside: Outside,
     /// Light selection proportional to emitted power (luminance); `None` when nothing emits.
     pub light_selection: Option<DiscreteDistribution>,
     /// Degenerate triangles dropped at load, per object name.
@@ -182,6 +188,16 @@ fn barycentrics([a, b, c]: &[Vec3; 3], p: Vec3) -> (f32, f32) {
     ((d22 * d1 - d12 * d2) / det, (d11 * d2 - d12 * d1) / det)
 }
 
+/// The name the environment goes by among the scene's lights (in stats and light lists).
+pub const ENVIRONMENT: &str = "environment";
+
+/// The sphere around the objects and the shaped lights, which lights from outside emit into.
+fn outside_of(objects: &[SceneObject], lights: &[LightDesc], meshes: &[Option<Arc<Mesh>>]) -> Outside {
+    let shaped = lights.iter().zip(meshes).filter_map(|(l, m)| Some((l.transform.world_from_object(), m.as_ref()?)));
+    let light_points = shaped.flat_map(|(xf, m)| m.positions.iter().map(move |p| xf.transform_point3(*p)));
+    Outside::around(objects.iter().flat_map(|o| o.world_positions.iter().copied()).chain(light_points))
+}
+
 fn world_positions(mesh: &Mesh, xf: &Affine3A) -> Vec<Vec3> {
     mesh.positions.iter().map(|p| xf.transform_point3(*p)).collect()
 }
@@ -220,7 +236,23 @@ impl Scene {
                 .map_err(|e| SceneError::Io { path: path.display().to_string(), message: e.to_string() })?;
             (load::parse_scene_json(&text)?, Vec::new(), Vec::new())
         };
-        let scene = Scene::from_desc_within(desc, &dir, root, &options.budget)?;
+        Scene::from_loaded_desc(desc, (&dir, root), options, warnings, animations)
+    }
+
+    /// Builds a loaded description: `options.environment` replaces the file's, a scene with no
+    /// light at all gets the default environment (and a warning, added to `warnings`).
+    pub fn from_loaded_desc(
+        mut desc: SceneDesc,
+        (dir, root): (&Path, &Path),
+        options: &gltf::ImportOptions,
+        mut warnings: Vec<String>,
+        animations: Vec<(String, animation::Animation)>,
+    ) -> Result<LoadedScene, SceneError> {
+        if let Some(env) = options.environment {
+            desc.environment = Some(env);
+        }
+        warnings.extend(load::light_the_lightless(&mut desc));
+        let scene = Scene::from_desc_within(desc, dir, root, &options.budget)?;
         Ok(LoadedScene { scene, warnings, animations })
     }
 
@@ -239,7 +271,7 @@ impl Scene {
         let (meshes, dropped_degenerate) = load::validate_and_build_meshes(&desc, dir, root, budget)?;
         let material_names: Vec<String> = desc.materials.keys().cloned().collect();
         let materials: Vec<Material> = desc.materials.values().cloned().collect();
-        let objects = desc
+        let objects: Vec<SceneObject> = desc
             .objects
             .iter()
             .zip(meshes)
@@ -264,19 +296,29 @@ impl Scene {
                 }
             })
             .collect();
-        let lights = desc
+        let meshes: Vec<Option<Arc<Mesh>>> =
+            desc.lights.iter().map(|l| light::emitter_mesh(&l.emitter).map(Arc::new)).collect();
+        let outside = outside_of(&objects, &desc.lights, &meshes);
+        let mut lights: Vec<SceneLight> = desc
             .lights
             .iter()
-            .map(|l| {
-                let mesh = light::emitter_mesh(&l.emitter).map(Arc::new);
-                SceneLight {
-                    name: l.name.clone(),
-                    geometry: LightGeometry::new(l, mesh.as_deref()),
-                    mesh,
-                    dynamic: l.dynamic,
-                }
+            .zip(meshes)
+            .map(|(l, mesh)| SceneLight {
+                name: l.name.clone(),
+                geometry: LightGeometry::new(l, mesh.as_deref(), outside),
+                mesh,
+                dynamic: l.dynamic,
             })
             .collect();
+        if let Some(env) = &desc.environment {
+            lights.push(SceneLight {
+                name: ENVIRONMENT.into(),
+                mesh: None,
+                geometry: LightGeometry::environment(env.radiance, outside),
+                dynamic: false,
+            });
+        }
+        let infinite_lights = (0..lights.len()).filter(|&i| lights[i].geometry.is_infinite()).collect();
         let mut scene = Scene {
             camera: Camera::from_desc(&desc.camera),
             desc,
@@ -284,6 +326,8 @@ impl Scene {
             material_names,
             objects,
             lights,
+            infinite_lights,
+            outside,
             light_selection: None,
             dropped_degenerate,
         };
@@ -294,6 +338,31 @@ impl Scene {
     /// The current scene description (edits are reflected in it).
     pub fn desc(&self) -> &SceneDesc {
         &self.desc
+    }
+
+    /// Index into `lights` of the environment, if the scene has one.
+    pub fn environment_light(&self) -> Option<usize> {
+        self.desc.environment.map(|_| self.desc.lights.len())
+    }
+
+    /// The world position of light `l`'s transform (the origin for the environment).
+    pub fn light_position(&self, l: usize) -> Vec3 {
+        self.desc.lights.get(l).map_or(Vec3::ZERO, |d| d.transform.translation())
+    }
+
+    /// Radiance arriving along a ray that leaves the scene in unit direction `dir`, from every
+    /// light from outside.
+    pub fn escaped(&self, dir: Vec3) -> crate::core::Rgb {
+        self.infinite_lights.iter().fold(crate::core::Rgb::BLACK, |sum, &l| sum + self.lights[l].geometry.escaped(dir))
+    }
+
+    /// Replaces the environment's radiance (the scene has one; validated by the caller).
+    pub fn set_environment(&mut self, env: EnvironmentDesc) {
+        if let Some(i) = self.environment_light() {
+            self.desc.environment = Some(env);
+            self.lights[i].geometry = LightGeometry::environment(env.radiance, self.outside);
+            self.update_light_selection();
+        }
     }
 
     fn update_light_selection(&mut self) {
@@ -388,8 +457,10 @@ impl Scene {
         self.objects.iter().position(|o| o.name == name)
     }
 
+    /// The index of the described light `name` (never the environment, which edits reach as
+    /// their own target).
     pub fn light_index(&self, name: &str) -> Option<usize> {
-        self.lights.iter().position(|l| l.name == name)
+        self.desc.lights.iter().position(|l| l.name == name)
     }
 
     /// Moves an object; the caller has validated `trs` and that the object is dynamic.
@@ -409,7 +480,7 @@ impl Scene {
         desc.transform = trs;
         desc.emitter = emitter;
         let l = &mut self.lights[index];
-        l.geometry = LightGeometry::new(desc, l.mesh.as_deref());
+        l.geometry = LightGeometry::new(desc, l.mesh.as_deref(), self.outside);
         self.update_light_selection();
     }
 

@@ -29,6 +29,18 @@ pub struct SceneDesc {
     pub objects: Vec<ObjectDesc>,
     #[serde(default)]
     pub lights: Vec<LightDesc>,
+    /// Light arriving from outside the scene along every ray that leaves it. Absent: none
+    /// (black), unless the scene has no light at all (see `load::light_the_lightless`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub environment: Option<EnvironmentDesc>,
+}
+
+/// The environment around a scene: `{"radiance": [r, g, b]}`, uniform radiance in
+/// W/(sr·m²) from every direction.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EnvironmentDesc {
+    pub radiance: Rgb,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -199,6 +211,16 @@ pub enum EmitterDesc {
     /// One-sided triangle mesh, emitting towards each triangle's front face and sampled by
     /// area (what glTF import makes of an emissive primitive); `radiance` in W/(sr·m²).
     Mesh { radiance: Rgb, positions: Positions, indices: Indices },
+    /// A distant light such as the sun: light travelling along `direction` (from the light into
+    /// the scene), `irradiance` in W/m² on a surface facing it, from a disc of angular diameter
+    /// `angle_deg` (0, the default, is a delta light whose shadows are sharp). It has no
+    /// placement: its transform must be the identity.
+    Directional {
+        direction: [f32; 3],
+        irradiance: Rgb,
+        #[serde(default)]
+        angle_deg: f32,
+    },
 }
 
 fn default_cone() -> f32 {

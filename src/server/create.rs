@@ -52,9 +52,8 @@ fn inline_glb(
         .decode(glb.trim())
         .map_err(|e| ApiError::invalid(format!("scene_glb: not base64: {e}")))?;
     let imported = crate::scene::gltf::import_slice(&bytes, None, options).map_err(|e| scene_error("scene_glb.", e))?;
-    let scene = Scene::from_desc_within(imported.desc, root, root, &options.budget)
-        .map_err(|e| scene_error("scene_glb: ", e))?;
-    Ok(LoadedScene { scene, warnings: imported.warnings, animations: imported.animations })
+    Scene::from_loaded_desc(imported.desc, (root, root), options, imported.warnings, imported.animations)
+        .map_err(|e| scene_error("scene_glb: ", e))
 }
 
 /// The denoiser could not start: 422 when this build lacks it, 503 when OIDN is missing.
@@ -104,9 +103,9 @@ impl AppState {
         let options = crate::scene::gltf::ImportOptions {
             budget: self.config.limits.scene_budget(),
             max_buffer_bytes: self.config.limits.max_body_bytes as u64,
+            environment: req.environment,
             ..Default::default()
         };
-        let budget = &options.budget;
         let (scene_name, scene_dir, loaded) = match (&req.scene, &req.scene_glb) {
             (Some(_), Some(_)) => return Err(ApiError::invalid("scene_glb: give either scene or scene_glb, not both")),
             (None, Some(glb)) => ("inline".to_string(), None, inline_glb(glb, root, &options)?),
@@ -126,8 +125,9 @@ impl AppState {
             (Some(value @ serde_json::Value::Object(_)), None) => {
                 let desc = crate::scene::load::parse_json(&value.to_string())
                     .map_err(|e| ApiError::invalid(format!("scene.{e}")))?;
-                let scene = Scene::from_desc_within(desc, root, root, budget).map_err(|e| scene_error("scene.", e))?;
-                ("inline".to_string(), None, LoadedScene { scene, warnings: Vec::new(), animations: Vec::new() })
+                let loaded = Scene::from_loaded_desc(desc, (root, root), &options, Vec::new(), Vec::new())
+                    .map_err(|e| scene_error("scene.", e))?;
+                ("inline".to_string(), None, loaded)
             }
             (Some(_), None) => {
                 return Err(ApiError::invalid("scene: expected a scene name (string) or an inline scene (object)"))

@@ -42,6 +42,9 @@ pub struct CreateSession {
     /// Denoise every frame with Open Image Denoise (absent: off).
     #[serde(default)]
     pub denoise: Option<DenoiseSettings>,
+    /// The environment to light the scene with, over the scene's own (`{"radiance": [..]}`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub environment: Option<crate::scene::EnvironmentDesc>,
 }
 
 impl CreateSession {
@@ -61,6 +64,7 @@ impl CreateSession {
             ("seed", self.seed != default_seed()),
             ("tick_hz", self.tick_hz.is_some()),
             ("denoise", self.denoise.is_some()),
+            ("environment", self.environment.is_some()),
         ];
         given.iter().filter(|(_, g)| *g).map(|(f, _)| *f).collect()
     }

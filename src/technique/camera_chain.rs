@@ -1,11 +1,12 @@
 //! Camera samples through ideal mirror and glass chains to the first diffuse surface, shared by
 //! the techniques that shade diffuse surfaces from a cache (`photon_reuse`, `instant_cache`).
-//! Lights seen directly or through the chain add their emission (next-event estimation cannot
-//! reach them there); the chain gives up after [`MAX_SPECULAR_CHAIN`] specular bounces.
+//! Lights seen directly or through the chain, and the lights outside the scene along a ray that
+//! leaves it, add their emission (next-event estimation cannot reach them there); the chain
+//! gives up after [`MAX_SPECULAR_CHAIN`] specular bounces.
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::Ray;
 use crate::scene::{Material, Normals, Scene, SceneAccel, SurfaceId, Transport};
-use crate::technique::nee::sample_next_event;
+use crate::technique::nee::{escaped_radiance, sample_next_event};
 use glam::{Vec2, Vec3};
 
 /// Longest specular chain a camera ray follows before it gives up.
@@ -84,7 +85,10 @@ pub fn trace(scene: &Scene, accel: &SceneAccel, index: usize, jitter: Vec2, rng:
         if depth > 0 {
             out.specular_rays += 1;
         }
-        let Some(hit) = accel.scene().intersect1(&ray) else { break };
+        let Some(hit) = accel.scene().intersect1(&ray) else {
+            out.emitted += beta * escaped_radiance(scene, ray.dir, None);
+            break;
+        };
         let Some((surface, prim)) = accel.resolve(&hit) else { break };
         let sp = scene.surface_point(surface, prim, hit.u, hit.v);
         let wo = -ray.dir;

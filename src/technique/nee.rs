@@ -1,5 +1,6 @@
 //! Next-event estimation shared by the techniques: pick one light by power, sample a point on
-//! it, and return the contribution that counts if the shadow ray towards it is unoccluded.
+//! it, and return the contribution that counts if the shadow ray towards it is unoccluded; and
+//! the light a ray finds when it leaves the scene, weighted against next-event estimation.
 use crate::core::sampling::power_heuristic;
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::Ray;
@@ -50,7 +51,7 @@ pub fn sample_next_event(
     let u = rng.next_2d();
     let side = if n.dot(wo) >= 0.0 { n } else { -n };
     let origin = offset_ray_origin(p, side);
-    let s = scene.lights[li].geometry.sample_incident(origin, u)?;
+    let s = scene.lights[li].geometry.sample_incident(origin, side, u)?;
     let f = material.eval(normals, wo, s.wi, Transport::Radiance);
     if f.is_black() || s.pdf <= 0.0 {
         return None;
@@ -65,4 +66,29 @@ pub fn sample_next_event(
         light_point: origin + s.wi * s.dist,
         light_normal: s.normal,
     })
+}
+
+/// Radiance from the lights outside the scene along a ray that leaves it in unit direction
+/// `dir`. `bsdf` is the solid-angle density with which the BSDF sampled `dir` and the
+/// geometric normal on the side of `wo` at the vertex it left, when next-event estimation
+/// (with MIS, as [`sample_next_event`] weighs it) also reached these lights; `None` for camera
+/// rays and specular bounces, which count the whole radiance.
+pub fn escaped_radiance(scene: &Scene, dir: Vec3, bsdf: Option<(f32, Vec3)>) -> Rgb {
+    let mut sum = Rgb::BLACK;
+    for &l in &scene.infinite_lights {
+        let geometry = &scene.lights[l].geometry;
+        let le = geometry.escaped(dir);
+        if le.is_black() {
+            continue;
+        }
+        let weight = match bsdf {
+            None => 1.0,
+            Some((pdf, side)) => {
+                let pmf = scene.light_selection.as_ref().map_or(0.0, |d| d.pmf(l));
+                power_heuristic(pdf, pmf * geometry.pdf_direction(dir, side))
+            }
+        };
+        sum += le * weight;
+    }
+    sum
 }

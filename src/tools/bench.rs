@@ -130,7 +130,7 @@ fn incoherent_rays(scene: &Scene, accel: &SceneAccel) -> (Vec<Ray>, Vec<Ray>) {
             bounce.push(Ray::new(origin, dir));
             if let Some(select) = &scene.light_selection {
                 let (li, _, _) = select.sample(rng.next_f32());
-                if let Some(s) = scene.lights[li].geometry.sample_incident(origin, rng.next_2d()) {
+                if let Some(s) = scene.lights[li].geometry.sample_incident(origin, n, rng.next_2d()) {
                     shadow.push(Ray::segment(origin, s.wi, s.dist * 0.9999));
                 }
             }

@@ -106,6 +106,9 @@ fn relight_edit(run: &AnimationRun) -> Result<Edit> {
         EmitterDesc::Mesh { radiance, positions, indices } => {
             EmitterDesc::Mesh { radiance: radiance * dim, positions, indices }
         }
+        EmitterDesc::Directional { direction, irradiance, angle_deg } => {
+            EmitterDesc::Directional { direction, irradiance: irradiance * dim, angle_deg }
+        }
     };
     Ok(Edit::Light { name: light.name.clone(), transform: None, emitter: Some(emitter) })
 }

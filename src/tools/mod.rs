@@ -27,6 +27,10 @@ pub struct SceneArgs {
     /// glTF only: uniform scale for the whole scene (glTF is in metres).
     #[arg(long, value_name = "FACTOR")]
     pub scale: Option<f32>,
+    /// The environment to light the scene with, over the file's own, as scene JSON gives it:
+    /// '{"radiance": [1, 1, 1]}'.
+    #[arg(long, value_name = "JSON", value_parser = environment_json)]
+    pub environment: Option<crate::scene::EnvironmentDesc>,
     /// Image width (default: the scene camera's).
     #[arg(long)]
     pub width: Option<u32>,
@@ -42,6 +46,13 @@ pub struct SceneArgs {
     pub isa: Option<crate::embree::Isa>,
 }
 
+/// `--environment`: scene JSON's `environment`, validated.
+fn environment_json(text: &str) -> Result<crate::scene::EnvironmentDesc, String> {
+    let env: crate::scene::EnvironmentDesc = serde_json::from_str(text).map_err(|e| e.to_string())?;
+    crate::scene::load::validate_environment("environment", &env).map_err(|e| e.to_string())?;
+    Ok(env)
+}
+
 impl SceneArgs {
     /// Loads the scene file (JSON or glTF) at the requested size, printing the load report's
     /// warnings on stderr. Mistakes in the file or the flags are usage errors.
@@ -54,6 +65,7 @@ impl SceneArgs {
         let options = crate::scene::gltf::ImportOptions {
             camera: self.camera.clone(),
             scale: self.scale.unwrap_or(1.0),
+            environment: self.environment,
             ..Default::default()
         };
         let mut loaded = crate::scene::Scene::load_file(path, &scenes_root_for(path), &options)

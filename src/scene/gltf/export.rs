@@ -6,8 +6,10 @@
 //! Materials map back as `materials.rs` reads them. Area lights become emissive meshes
 //! (`emissiveFactor` × `KHR_materials_emissive_strength` = radiance, black base colour),
 //! point and spot lights `KHR_lights_punctual` lights (candela = 683 × W/sr, axis turned to
-//! −Z). The camera keeps its resolution and look-at distance in `extras.relume`, dynamic
-//! objects and lights say so there too. Animation tracks become LINEAR channels.
+//! −Z), directional lights directional ones (lux = 683 × W/m², −Z along the direction, a
+//! non-zero `angle_deg` in the node's `extras.relume`). The camera keeps its resolution and
+//! look-at distance in `extras.relume`, dynamic objects and lights say so there too, and the
+//! scene its environment. Animation tracks become LINEAR channels.
 use super::import::{light_axis_flip, LUMENS_PER_WATT};
 use crate::scene::animation::{Animation, Track};
 use crate::scene::load::{invalid, SceneError};
@@ -111,7 +113,7 @@ pub fn export_glb(scene: &Scene, animations: &[(String, Animation)]) -> Result<V
     let mut doc = json!({
         "asset": {"version": "2.0", "generator": concat!("relume ", env!("CARGO_PKG_VERSION"))},
         "scene": 0,
-        "scenes": [{"nodes": (0..w.nodes.len()).collect::<Vec<_>>()}],
+        "scenes": [scene_json(scene, w.nodes.len())],
         "nodes": w.nodes, "meshes": w.meshes, "materials": w.materials,
         "cameras": [camera_json(&scene.desc().camera)],
         "buffers": [{"byteLength": w.bin.data.len()}],
@@ -137,6 +139,15 @@ pub fn export_glb(scene: &Scene, animations: &[(String, Animation)]) -> Result<V
 
 fn trs_json(t: &Trs) -> Value {
     json!({"translation": t.translation, "rotation": t.rotation, "scale": t.scale})
+}
+
+/// The glTF scene of `nodes` root nodes, with the environment in its `extras.relume`.
+fn scene_json(scene: &Scene, nodes: usize) -> Value {
+    let mut out = json!({"nodes": (0..nodes).collect::<Vec<_>>()});
+    if let Some(env) = &scene.desc().environment {
+        out["extras"] = json!({"relume": {"environment": env}});
+    }
+    out
 }
 
 fn dynamic_extras(dynamic: bool) -> Value {
@@ -238,6 +249,18 @@ impl Writer {
                         *intensity,
                         json!({"type": "spot", "spot": {"innerConeAngle": inner, "outerConeAngle": outer}}),
                     ))
+                }
+                EmitterDesc::Directional { direction, irradiance, angle_deg } => {
+                    if *angle_deg > 0.0 {
+                        node["extras"]["relume"]["angle_deg"] = json!(angle_deg);
+                    }
+                    let index = self.punctual_light(*irradiance, json!({"type": "directional"}));
+                    let rotation = Quat::from_rotation_arc(Vec3::NEG_Z, Vec3::from(*direction).normalize());
+                    node["rotation"] = json!(rotation.to_array());
+                    node["extensions"] = json!({"KHR_lights_punctual": {"light": index}});
+                    self.light_nodes.insert(l.name.clone(), (self.nodes.len(), true));
+                    self.nodes.push(node);
+                    continue;
                 }
                 EmitterDesc::Rect { radiance }
                 | EmitterDesc::Disc { radiance, .. }

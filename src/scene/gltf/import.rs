@@ -291,10 +291,27 @@ impl<'a> Importer<'a> {
                 falloff_start_deg: Some(inner_cone_angle.to_degrees()),
             },
             Kind::Directional => {
-                return Err(invalid(
-                    field,
-                    "directional lights are not supported (relume has no distant light); use a large emissive mesh or a spot light",
-                ))
+                let direction = info.world.transform_vector3(Vec3::NEG_Z);
+                if !(direction.is_finite() && direction.length() > 1e-6) {
+                    return Err(invalid(format!("{label}.rotation"), "the light's −Z axis has no direction"));
+                }
+                if info.dynamic {
+                    self.warnings
+                        .add("animation of a directional light is not read; it keeps its first direction", label);
+                }
+                let angle_deg =
+                    relume_extras(node.extras()).and_then(|e| e.get("angle_deg")?.as_f64()).map_or(0.0, |a| a as f32);
+                let emitter = EmitterDesc::Directional {
+                    direction: direction.normalize().to_array(),
+                    irradiance: intensity,
+                    angle_deg,
+                };
+                crate::scene::load::validate_emitter(&field, &emitter)?;
+                self.count(0)?;
+                let name = node.name().map(str::to_string).or(light.name().map(str::to_string));
+                let name = unique(&mut self.light_names, name.unwrap_or_else(|| format!("light{}", node.index())));
+                self.lights.push(LightDesc { name, emitter, transform: Trs::default(), dynamic: false });
+                return Ok(());
             }
         };
         let name = node.name().map(str::to_string).or(light.name().map(str::to_string));

@@ -60,11 +60,19 @@ pub struct ImportOptions {
     pub budget: SceneBudget,
     /// Bytes the buffers may hold in all.
     pub max_buffer_bytes: u64,
+    /// The environment to light the scene with, over the file's own.
+    pub environment: Option<crate::scene::EnvironmentDesc>,
 }
 
 impl Default for ImportOptions {
     fn default() -> ImportOptions {
-        ImportOptions { camera: None, scale: 1.0, budget: SceneBudget::default(), max_buffer_bytes: 1 << 31 }
+        ImportOptions {
+            camera: None,
+            scale: 1.0,
+            budget: SceneBudget::default(),
+            max_buffer_bytes: 1 << 31,
+            environment: None,
+        }
     }
 }
 
@@ -152,8 +160,21 @@ fn convert(doc: &gltf::Document, buffers: &[Vec<u8>], options: &ImportOptions) -
         materials: importer.materials,
         objects: importer.objects,
         lights: importer.lights,
+        environment: scene_environment(&scene)?,
     };
     Ok(Imported { desc, animations, warnings: importer.warnings.into_lines() })
+}
+
+/// The scene's `extras.relume.environment`, if it has one (validated).
+fn scene_environment(scene: &gltf::Scene) -> Result<Option<crate::scene::EnvironmentDesc>, SceneError> {
+    let Some(value) = nodes::relume_extras(scene.extras()).and_then(|e| e.get("environment").cloned()) else {
+        return Ok(None);
+    };
+    let field = "scenes.extras.relume.environment";
+    let env: crate::scene::EnvironmentDesc =
+        serde_json::from_value(value).map_err(|e| invalid(field, e.to_string()))?;
+    crate::scene::load::validate_environment(field, &env)?;
+    Ok(Some(env))
 }
 
 /// The camera node to use: the one whose camera or node is called `name`, or the first

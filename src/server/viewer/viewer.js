@@ -131,6 +131,33 @@ function sendMove() {
   state.edits = (state.edits || 0) + 1;
 }
 
+// The scene's first directional light, turned by the sun sliders: elevation above the
+// horizon and azimuth about +Y (0 towards −Z), of the direction the light comes from.
+function sunLight() {
+  return (state.scene.lights || []).find((l) => l.emitter.type === "directional");
+}
+
+function setSunSliders() {
+  const sun = sunLight();
+  $("sun").hidden = !sun;
+  if (!sun) return;
+  const d = sun.emitter.direction.map((v) => -v);
+  const len = Math.hypot(...d) || 1;
+  $("sun-elevation").value = (Math.asin(d[1] / len) * 180) / Math.PI;
+  $("sun-azimuth").value = (Math.atan2(d[0], -d[2]) * 180) / Math.PI;
+}
+
+function sendSun() {
+  const sun = sunLight();
+  if (!sun || !state.ws || state.ws.readyState !== 1) return;
+  const up = (Number($("sun-elevation").value) * Math.PI) / 180;
+  const az = (Number($("sun-azimuth").value) * Math.PI) / 180;
+  const from = [Math.cos(up) * Math.sin(az), Math.sin(up), -Math.cos(up) * Math.cos(az)];
+  sun.emitter = Object.assign({}, sun.emitter, { direction: from.map((v) => -v) });
+  state.ws.send(JSON.stringify({ type: "edits", edits: [{ target: "light", name: sun.name, emitter: sun.emitter }] }));
+  state.edits = (state.edits || 0) + 1;
+}
+
 function scheduleMove() {
   if (state.pending) return;
   state.pending = requestAnimationFrame(() => { state.pending = null; sendMove(); });
@@ -242,6 +269,7 @@ async function start(glb) {
     state.extent = Math.hypot(c.position[0] - c.look_at[0], c.position[1] - c.look_at[1], c.position[2] - c.look_at[2]) * 0.6;
     setOptions($("target"), targets().map((t) => ({ value: `${t.kind}/${t.name}`, text: `${t.kind} ${t.name}` })));
     setSliders();
+    setSunSliders();
     const entry = glb ? null : state.scenes.find((x) => x.name === $("scene").value);
     const animations = (s.animations || []).length ? s.animations : entry ? entry.animations : [];
     setOptions($("animation"), animations.map((a) => ({ value: a, text: a })));
@@ -379,6 +407,10 @@ window.addEventListener("pagehide", () => {
 });
 $("target").addEventListener("change", setSliders);
 ["tx", "ty", "tz", "turn"].forEach((id) => $(id).addEventListener("input", scheduleMove));
+["sun-elevation", "sun-azimuth"].forEach((id) => $(id).addEventListener("input", () => {
+  if (state.pendingSun) return;
+  state.pendingSun = requestAnimationFrame(() => { state.pendingSun = null; sendSun(); });
+}));
 $("play").addEventListener("click", () => state.ws && state.ws.send(JSON.stringify({ type: "play", anim: $("animation").value, speed: 1 })));
 $("pause").addEventListener("click", () => state.ws && state.ws.send(JSON.stringify({ type: "pause" })));
 installDrag();

@@ -6,7 +6,7 @@ use super::vertex::{hit_vertex, material, mis_weight, scatter, CameraDensity, Ve
 use crate::core::{offset_ray_origin, Rgb, Rng};
 use crate::embree::{Hit, Ray};
 use crate::scene::{Scene, SceneAccel, Transport};
-use crate::technique::nee::{sample_next_event, shadow_segment};
+use crate::technique::nee::{escaped_radiance, sample_next_event, shadow_segment};
 use crate::technique::path::packets::{LanePath, ShadowTest};
 use glam::Vec3;
 
@@ -105,6 +105,13 @@ impl LanePath for BdptLane {
         let scene = ctx.scene;
         let prev = self.eye[self.eye.len() - 1];
         let Some(mut v) = hit_vertex(scene, ctx.accel, &self.ray, hit, &prev, self.beta, self.pdf_dir) else {
+            // (0, t) for the lights outside: weighed against (1, t) alone (see `escaped_weight`).
+            if !scene.infinite_lights.is_empty() {
+                let nee_reached = self.eye.len() > 1 && self.pdf_dir > 0.0;
+                let side = if prev.n.dot(prev.wo) >= 0.0 { prev.n } else { -prev.n };
+                let bsdf = nee_reached.then_some((self.pdf_dir, side));
+                self.radiance += self.beta * escaped_radiance(scene, self.ray.dir, bsdf);
+            }
             self.done = true;
             return;
         };
@@ -165,6 +172,12 @@ impl BdptLane {
         let Some(m) = material(scene, &e) else { return };
         let Some(ne) = sample_next_event(scene, m, e.p, e.normals(), e.wo, &mut self.rng, false) else { return };
         let geometry = &scene.lights[ne.light].geometry;
+        if geometry.is_infinite() {
+            let side = if e.n.dot(e.wo) >= 0.0 { e.n } else { -e.n };
+            let w = escaped_weight(geometry, ne.light_pmf, m.pdf(e.n, e.wo, ne.shadow.dir), (ne.shadow.dir, side));
+            shadows.push(ShadowTest { ray: ne.shadow, lane, contribution: self.beta * ne.contribution * w });
+            return;
+        }
         let sampled = Vertex {
             kind: VertexKind::Light(ne.light as u32),
             p: ne.light_point,
@@ -222,5 +235,16 @@ impl BdptLane {
             let Some(ray) = shadow_segment(from, to) else { continue };
             shadows.push(ShadowTest { ray, lane, contribution: self.beta * f * l.beta * (g * w) });
         }
+    }
+}
+
+/// The (1, t) weight of a sample towards a light from outside. Light subpaths never start on
+/// these lights (see `vertex::light_subpath`), so their paths have two strategies, (1, t) and
+/// (0, t), weighed by the power heuristic as `path` does; a delta sun has only (1, t).
+fn escaped_weight(geometry: &crate::scene::LightGeometry, pmf: f32, bsdf_pdf: f32, (wi, side): (Vec3, Vec3)) -> f32 {
+    if geometry.is_delta() {
+        1.0
+    } else {
+        crate::core::sampling::power_heuristic(pmf * geometry.pdf_direction(wi, side), bsdf_pdf)
     }
 }

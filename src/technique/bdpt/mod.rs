@@ -63,6 +63,13 @@
 //! Russian roulette on light subpaths uses the product of BSDF weights since the light, so it
 //! does not depend on the light's power or the scene's units (`vertex.rs::light_subpath`).
 //!
+//! # Light from outside
+//! Light subpaths never start on the sun or the environment (a subpath that picks one is
+//! empty): their light reaches the image through the eye subpath alone, by (1, t) next-event
+//! samples and (0, t) escapes weighted against each other as in `path`. This stays unbiased,
+//! but sunlight caustics (sun → glass → diffuse) are found only by (0, t) through a non-delta
+//! sun, not by light tracing.
+//!
 //! # Failure modes
 //! Caustics seen through a mirror or glass (light → specular → diffuse → specular → camera)
 //! have no connectable strategy at a point light and stay missing, as in every unbiased

@@ -230,13 +230,19 @@ pub fn hit_vertex(
 /// Traces one light subpath of at most `max_vertices` vertices after the light's: a light by
 /// power, a point and direction by its emission distribution, then BSDF sampling with Russian
 /// roulette by the throughput since the light (scale-free: the light's units do not matter).
-/// Lights absorb: a light subpath stops where it meets one. Returns the vertices and the rays
-/// traced.
+/// Lights absorb: a light subpath stops where it meets one. A light from outside (picked with
+/// its share of the power) gives an empty subpath: its light reaches the image by the eye
+/// subpath's (0, t) and (1, t) alone, weighed against each other in `lane.rs`. Returns the
+/// vertices and the rays traced.
 pub fn light_subpath(scene: &Scene, accel: &SceneAccel, max_vertices: usize, rng: &mut Rng) -> (Vec<Vertex>, u64) {
     let mut path = Vec::new();
     let Some(select) = &scene.light_selection else { return (path, 0) };
     let (l, pmf, _) = select.sample(rng.next_f32());
     let geometry = &scene.lights[l].geometry;
+    if geometry.is_infinite() {
+        // Lights from outside reach the image through the eye subpath's strategies alone.
+        return (path, 0);
+    }
     let Some((origin, dir, weight)) = geometry.sample_emission(rng.next_2d(), rng.next_2d()) else { return (path, 0) };
     let n = geometry.surface_normal();
     path.push(Vertex {

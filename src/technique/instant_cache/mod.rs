@@ -84,6 +84,11 @@
 //! earlier ticks' pixels put them, so its image differs from `static`'s by where the
 //! interpolation error falls, not by how large it is.
 //!
+//! # Light from outside
+//! VPL paths from the sun and the environment start on a disc of the scene's bounding
+//! sphere's radius facing their direction; direct light from them is next-event estimation
+//! (the environment sampled cosine-weighted about the surface), not VPLs.
+//!
 //! # Failure modes
 //! Small bright VPLs near a surface still show as spots above the clamp distance; glossy
 //! transport is not handled; a caching radius too large for fine geometry blurs contact

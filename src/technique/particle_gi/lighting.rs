@@ -160,7 +160,7 @@ fn irradiance_from(inputs: &Inputs, l: usize, i: usize, origin: glam::Vec3, norm
     let count = if light.geometry.is_delta() { 1 } else { inputs.samples };
     let (mut sum, mut rays) = (Rgb::BLACK, 0u64);
     for _ in 0..count {
-        let Some(s) = light.geometry.sample_incident(origin, rng.next_2d()) else { continue };
+        let Some(s) = light.geometry.sample_incident(origin, n, rng.next_2d()) else { continue };
         let cos = s.wi.dot(n);
         if cos <= 0.0 || s.pdf <= 0.0 || s.li.is_black() {
             continue;

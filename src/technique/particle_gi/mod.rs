@@ -64,6 +64,11 @@
 //! the shading factor of the direction it arrives from (`Normals::diffuse_factor`), and so is
 //! each gathering link's radiance. Flat scenes skip this.
 //!
+//! # Light from outside
+//! Particles are lit by the sun and the environment as by any light (shadow rays; the
+//! environment sampled cosine-weighted about the particle's normal), so an edit that only
+//! dims them stays a rescale of the particles' flux.
+//!
 //! # Failure modes
 //! Thin features below the particle spacing get their neighbours' light; link ends and lists
 //! keep to one object and one side of its winding, so a mesh wound inconsistently loses

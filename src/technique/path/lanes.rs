@@ -6,7 +6,7 @@ use super::packets::{LanePath, ShadowTest};
 use crate::core::{offset_ray_origin, sampling::power_heuristic, Rgb, Rng};
 use crate::embree::{Hit, Ray};
 use crate::scene::{Scene, SceneAccel, SurfaceId, Transport};
-use crate::technique::nee::sample_next_event;
+use crate::technique::nee::{escaped_radiance, sample_next_event};
 use glam::Vec3;
 
 /// What a `path` lane reads while shading.
@@ -31,6 +31,9 @@ pub struct PathLane {
     /// Solid-angle pdf of the BSDF sample that produced `ray`.
     bsdf_pdf: f32,
     prev_point: Vec3,
+    /// The geometric normal at the previous vertex on the side the path arrived from (what
+    /// next-event estimation sampled the environment about).
+    prev_side: Vec3,
     eta_scale: f32,
     path_done: bool,
     /// Ended by l_m.
@@ -50,6 +53,7 @@ impl LanePath for PathLane {
             specular_bounce: false,
             bsdf_pdf: 0.0,
             prev_point: Vec3::ZERO,
+            prev_side: Vec3::ZERO,
             eta_scale: 1.0,
             path_done: false,
             truncated: false,
@@ -67,6 +71,7 @@ impl LanePath for PathLane {
         lane.specular_bounce = false;
         lane.bsdf_pdf = 0.0;
         lane.prev_point = lane.ray.origin;
+        lane.prev_side = Vec3::ZERO;
         lane.eta_scale = 1.0;
         lane.path_done = false;
         lane.truncated = false;
@@ -107,6 +112,12 @@ impl LanePath for PathLane {
 /// contribution it carries if unoccluded.
 fn shade(lane: &mut PathLane, hit: Option<Hit>, scene: &Scene, accel: &SceneAccel, max_len: u32) -> Option<(Ray, Rgb)> {
     let Some((h, (surface, prim))) = hit.and_then(|h| Some((h, accel.resolve(&h)?))) else {
+        // The path leaves the scene: the lights outside it, weighted against NEE's samples.
+        if !scene.infinite_lights.is_empty() {
+            let nee_reached = lane.depth > 0 && !lane.specular_bounce;
+            let le = escaped_radiance(scene, lane.ray.dir, nee_reached.then_some((lane.bsdf_pdf, lane.prev_side)));
+            lane.radiance += lane.beta * le;
+        }
         lane.path_done = true;
         return None;
     };
@@ -160,6 +171,7 @@ fn shade(lane: &mut PathLane, hit: Option<Hit>, scene: &Scene, accel: &SceneAcce
     lane.specular_bounce = bs.specular;
     lane.bsdf_pdf = bs.pdf;
     lane.prev_point = sp.p;
+    lane.prev_side = if n.dot(wo) >= 0.0 { n } else { -n };
     if bs.eta != 1.0 {
         lane.eta_scale *= bs.eta * bs.eta;
     }

@@ -46,6 +46,13 @@
 //! Regeneration changes only the order paths are traced in, never which paths: the image is
 //! identical with it on or off.
 //!
+//! # Light from outside
+//! The sun and the environment are lights like the others for next-event estimation (the
+//! environment sampled cosine-weighted about the surface, so an unoccluded diffuse point gets
+//! its exact irradiance from one sample); a path that leaves the scene adds their radiance,
+//! weighted against those samples by the power heuristic (camera rays and specular bounces
+//! count it whole: the background is the environment). A delta sun is reached by NEE alone.
+//!
 //! # Failure modes
 //! Caustics through glass or mirrors from small lights converge slowly (no light tracing; see
 //! `bdpt`); point lights seen only via mirrors are never found; lights hidden behind small

@@ -88,7 +88,7 @@ impl PhotonReuseConfig {
         let paths = u64::from(self.paths);
         let photons = paths * u64::from(self.max_photons);
         let cells = photons / u64::from((self.gather_photons / 4).max(1));
-        let with_origins = scene.lights.iter().any(|l| l.mesh.is_some());
+        let with_origins = super::store::keeps_origins(scene);
         product_sum(
             "paths",
             &[

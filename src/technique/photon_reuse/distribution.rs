@@ -84,9 +84,10 @@ pub struct EmissionFrame {
 
 impl EmissionFrame {
     /// The frame of light `light` as the scene holds it now; `None` for an area light without
-    /// triangles (it emits nothing).
+    /// triangles (it emits nothing) and for lights from outside, which never move (an edit of
+    /// their emission re-emits their paths).
     pub fn of(scene: &Scene, light: usize, resolution: MapResolution) -> Option<EmissionFrame> {
-        let desc = &scene.desc().lights[light];
+        let desc = scene.desc().lights.get(light)?;
         let world_from_object = desc.transform.world_from_object();
         let (kind, axis) = match &scene.lights[light].geometry {
             LightGeometry::Point { .. } => (Kind::Sphere, (desc.transform.rotation() * Vec3::Z).normalize()),
@@ -98,6 +99,7 @@ impl EmissionFrame {
                 let flat = (0..mesh.triangles.len()).map(|i| mesh.triangle(i).map(|p| p.truncate())).collect();
                 (Kind::Area { triangles: flat, normal }, normal)
             }
+            LightGeometry::Directional { .. } | LightGeometry::Environment { .. } => return None,
         };
         Some(EmissionFrame {
             kind,

@@ -77,7 +77,7 @@ pub fn update_origin(
     if old_power.is_black() {
         return (Moved::Invalid, 0);
     }
-    let position = scene.desc().lights[light].transform.translation();
+    let position = scene.light_position(light);
     let first = (photons > 0).then(|| photon_at(store, path, 0));
     let placed = match (&first, frame.is_area(), &store.origin) {
         (Some(p), false, _) => Some((position, (p.position - position).normalize_or_zero())),

@@ -78,6 +78,15 @@
 //! carries 1/N_light of its light's power, which is exact only while DM_C = DM_T: after a light
 //! moves, the cells pruned or filled over the next ticks are briefly over- or under-weighted.
 //!
+//! # Light from outside
+//! Photons from the sun and the environment start on a disc of the scene's bounding sphere's
+//! radius facing their direction, outside the sphere, and are stored and verified as any
+//! other path (with their origins). Direct light from them is next-event estimation. They have
+//! no distribution map yet: an edit that only scales their emission rescales their paths, and
+//! any other (a sun turn of any angle, even 1°) re-emits every path of that light, so a turning
+//! sun costs what a rebuild of its share of the paths costs. A moved object in sunlight stays a
+//! local change.
+//!
 //! # Failure modes
 //! Small bright lights seen only indirectly give blotchy indirect light at low N; large moving
 //! objects near the light invalidate most paths; an area-light cell whose sliver of the shape
@@ -202,7 +211,7 @@ impl PhotonReuse {
     fn build(&mut self, ctx: &RenderContext, tick: &mut TickWork) -> PathStore {
         let scene = ctx.scene;
         let n = self.config.paths as usize;
-        let with_origins = scene.lights.iter().any(|l| l.mesh.is_some());
+        let with_origins = store::keeps_origins(scene);
         let mut store = PathStore::new(n, self.config.max_photons as usize, with_origins, self.surfaces.clone());
         self.paths_per_light = vec![0; scene.lights.len()];
         self.maps = (0..scene.lights.len()).map(|_| None).collect();

@@ -245,6 +245,12 @@ impl StoreMemory {
     }
 }
 
+/// Whether paths must keep their origins: a point or spot light's paths all start where it
+/// stands, but an area light's and a light from outside's each start somewhere else.
+pub fn keeps_origins(scene: &Scene) -> bool {
+    scene.lights.iter().any(|l| l.mesh.is_some() || l.geometry.is_infinite())
+}
+
 impl PathStore {
     pub fn new(paths: usize, max_photons: usize, with_origins: bool, surfaces: SurfaceIds) -> PathStore {
         PathStore {

@@ -80,7 +80,7 @@ pub fn photon_at(store: &PathStore, path: usize, row: usize) -> Photon {
 pub fn path_origin(scene: &Scene, store: &PathStore, path: usize) -> Vec3 {
     match &store.origin {
         Some(o) => o[path],
-        None => scene.desc().lights[store.light_of(path)].transform.translation(),
+        None => scene.light_position(store.light_of(path)),
     }
 }
 
@@ -106,7 +106,7 @@ impl Tracer<'_> {
         let frame = self.frames.get(light).copied().flatten();
         // A point or spot light emits from where it is now; the path's stored origin is where
         // it was when the path was traced (an area light's cell brings its own origin).
-        let here = self.scene.desc().lights[light].transform.translation();
+        let here = self.scene.light_position(light);
         let in_cell = match (cell, frame) {
             (Some(c), Some(f)) => f.sample_in_cell(c, here, rng),
             _ => None,
