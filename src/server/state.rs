@@ -556,6 +556,79 @@ mod tests {
         assert_eq!(s.session_count(), 0);
     }
 
+    /// Hazard: under open-loop load, commands queued behind a running tick were served one by
+    /// one, so the first queued tick request ran a tick at once, before the edits sent after
+    /// it were even read: clients waited a tick per request and their edits missed the tick
+    /// they asked for. The worker's turn is held here while edits and tick requests queue up
+    /// behind its first tick (deterministically, no sleeps): once released, one more tick must
+    /// apply every one of those edits and answer every request. (Run against the loop before
+    /// this change, the second tick applied only the first edit.)
+    #[test]
+    fn edits_and_ticks_queued_behind_a_tick_collapse_into_one_tick() {
+        use crate::scene::edits::Edit;
+        use futures_util::future::poll_immediate;
+        // No rate cap to speak of: it would hold the second tick back and hide the hazard.
+        let s = state(Limits { max_tick_hz: 1e9, ..Limits::default() });
+        let create =
+            serde_json::json!({"scene": "cornell-box", "width": 16, "height": 16, "technique": {"id": "path"}});
+        let view = s.create_session(serde_json::from_value(create).expect("request")).expect("created");
+        let handle = &s.session(&view.id).expect("listed").handle;
+        let wait_for_turns = |n: u64| {
+            while s.turns.waiting() != n {
+                std::thread::yield_now();
+            }
+        };
+        let (release, gate) = std::sync::mpsc::channel::<()>();
+        let turns = s.turns.clone();
+        let holder = std::thread::spawn(move || turns.run(|| gate.recv()));
+        wait_for_turns(1);
+        let runtime = tokio::runtime::Builder::new_current_thread().build().expect("runtime");
+        let camera = |k: usize| Edit::Camera {
+            position: Some([278.0, 273.0, -800.0 - k as f32]),
+            look_at: None,
+            up: None,
+            vfov_deg: None,
+        };
+        let (acks, ticks) = runtime.block_on(async {
+            let mut first = Box::pin(handle.tick());
+            assert!(poll_immediate(&mut first).await.is_none());
+            wait_for_turns(2);
+            let (mut acks, mut ticks) = (Vec::new(), Vec::new());
+            for k in 0..8 {
+                let mut ack = Box::pin(handle.edits(vec![camera(k)]));
+                assert!(poll_immediate(&mut ack).await.is_none());
+                let mut tick = Box::pin(handle.tick());
+                assert!(poll_immediate(&mut tick).await.is_none());
+                acks.push(ack);
+                ticks.push(tick);
+            }
+            release.send(()).expect("the holder waits");
+            first.await.expect("the first tick");
+            let mut seqs = Vec::new();
+            for a in acks {
+                seqs.push(a.await.expect("acknowledged").seq);
+            }
+            let mut stats = Vec::new();
+            for t in ticks {
+                stats.push(t.await.expect("ticked"));
+            }
+            (seqs, stats)
+        });
+        holder.join().expect("holder").expect("released");
+        let last = *acks.iter().max().expect("acks");
+        for t in &ticks {
+            assert_eq!(t.tick, ticks[0].tick, "the queued requests were answered by different ticks");
+            assert!(
+                t.edits_applied_through >= last,
+                "a tick answered a request without its edits: {} < {last}",
+                t.edits_applied_through
+            );
+        }
+        assert_eq!(ticks[0].edits_received, 8);
+        assert_eq!(ticks[0].edits_coalesced, 7, "the camera edits were not merged into one");
+        s.remove_session_blocking(&view.id).expect("deleted");
+    }
+
     fn view_of(s: &AppState, id: &str) -> SessionView {
         view(&s.session(id).expect("listed"))
     }

@@ -8,20 +8,28 @@
 //! Watch semantics: a consumer slower than the ticks receives only the newest frame; the frames
 //! it never saw are counted (`frames_dropped` in each stats message and in `/metrics`). Edits are
 //! never dropped: each batch is acknowledged (`edits_accepted`) or answered with an `error`.
-//! A bad message gets an `error` reply and the connection stays open.
+//! A bad message gets an `error` reply and the connection stays open. Replies keep the order of
+//! their messages, but reading never waits for a tick: a batch is queued at once and
+//! acknowledged when the worker takes it (before its next tick), and a `tick` joins the
+//! session's pending tick, so a client sending faster than the session ticks has its edits
+//! merged into the next tick instead of queueing behind ticks.
 use super::encoded::EncodingKey;
 use super::error::ApiError;
+use super::protocol::EditsAccepted;
 use super::protocol::{
     ClientMessage, EditBatch, FrameFormat, FrameHeader, PlayingAnimation, ServerMessage, UpdateSession,
 };
 use super::routes::{parse_body, update, Shared};
 use super::state::{valid_name, SessionEntry};
-use super::worker::PublishedFrame;
+use super::worker::{gone, Answer, PublishedFrame};
 use crate::film::ImageFormat;
 use crate::scene::animation::Animation;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Path, State};
 use axum::response::Response;
+use futures_util::stream::{FuturesOrdered, StreamExt};
+use std::future::Future;
+use std::pin::Pin;
 use std::sync::atomic::Ordering;
 use std::sync::Arc;
 
@@ -169,16 +177,22 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
     let mut last_seen: Option<u64> = None;
     let mut dropped = 0u64;
     let mut ping = tokio::time::interval_at(tokio::time::Instant::now() + PING_EVERY, PING_EVERY);
+    // Replies in the order their messages came, each sent once it is ready: reading goes on
+    // while a batch waits for its acknowledgement (at most the tick in progress).
+    let mut replies: FuturesOrdered<Reply> = FuturesOrdered::new();
     loop {
         tokio::select! {
             incoming = socket.recv() => {
                 state.touch(&entry);
                 let reply = match incoming {
                     Some(Ok(Message::Text(t))) => handle(&state, &entry, &mut sub, t.as_bytes()).await,
-                    Some(Ok(Message::Binary(_))) => Some(error_message(&ApiError::bad_request("binary messages are for frames; send JSON text"))),
+                    Some(Ok(Message::Binary(_))) => ready(Some(error_message(&ApiError::bad_request("binary messages are for frames; send JSON text")))),
                     Some(Ok(Message::Close(_))) | None | Some(Err(_)) => break,
-                    Some(Ok(_)) => None,
+                    Some(Ok(_)) => ready(None),
                 };
+                replies.push_back(reply);
+            }
+            Some(reply) = replies.next(), if !replies.is_empty() => {
                 if let Some(r) = reply {
                     if socket.send(r).await.is_err() {
                         break;
@@ -222,44 +236,62 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
     }
 }
 
-/// Handles one client message; returns the reply to send, if any.
-async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, bytes: &[u8]) -> Option<Message> {
+/// A reply to one client message, once it is ready (`None`: the message has no reply).
+type Reply = Pin<Box<dyn Future<Output = Option<Message>> + Send>>;
+
+fn ready(reply: Option<Message>) -> Reply {
+    Box::pin(std::future::ready(reply))
+}
+
+/// An edit batch's acknowledgement, once the worker has queued it.
+fn acknowledgement(answer: Answer<EditsAccepted>) -> Reply {
+    Box::pin(async move {
+        let outcome = answer.await.unwrap_or_else(|_| Err(gone()));
+        Some(match outcome {
+            Ok(a) => text(&ServerMessage::EditsAccepted { queued: a.queued, pending: a.pending, seq: a.seq }),
+            Err(e) => error_message(&e),
+        })
+    })
+}
+
+/// Handles one client message; returns its reply. Edits and ticks are queued at once and never
+/// wait for a tick here: an edit batch's acknowledgement comes when the worker has queued it,
+/// and a tick's frame and stats through the subscription.
+async fn handle(state: &Shared, entry: &SessionEntry, sub: &mut Subscription, bytes: &[u8]) -> Reply {
     let message = match parse_message(bytes) {
         Ok(m) => m,
-        Err(e) => return Some(error_message(&e)),
+        Err(e) => return ready(Some(error_message(&e))),
     };
-    let outcome: Result<Option<ServerMessage>, ApiError> =
-        match message {
-            ClientMessage::Edits { edits } => {
-                if let Err(e) = state.config.limits.check_edit_count("edits", edits.len()) {
-                    Err(e)
-                } else {
-                    state.metrics.edits_received.fetch_add(edits.len() as u64, Ordering::Relaxed);
-                    entry.handle.edits(edits).await.map(|a| {
-                        Some(ServerMessage::EditsAccepted { queued: a.queued, pending: a.pending, seq: a.seq })
-                    })
-                }
+    let outcome: Result<Option<ServerMessage>, ApiError> = match message {
+        ClientMessage::Edits { edits } => {
+            let sent = state.config.limits.check_edit_count("edits", edits.len()).and_then(|()| {
+                state.metrics.edits_received.fetch_add(edits.len() as u64, Ordering::Relaxed);
+                entry.handle.send_edits(edits)
+            });
+            return match sent {
+                Ok(answer) => acknowledgement(answer),
+                Err(e) => ready(Some(error_message(&e))),
+            };
+        }
+        ClientMessage::Tick => entry.handle.request_tick().map(|_| None),
+        ClientMessage::Subscribe { frames, stats, every, denoised } => {
+            if every == 0 {
+                Err(ApiError::invalid("every: must be at least 1"))
+            } else {
+                *sub = Subscription { frames, stats, every, denoised };
+                Ok(None)
             }
-            // The frame and stats arrive through the subscription once the tick publishes.
-            ClientMessage::Tick => entry.handle.tick().await.map(|_| None),
-            ClientMessage::Subscribe { frames, stats, every, denoised } => {
-                if every == 0 {
-                    Err(ApiError::invalid("every: must be at least 1"))
-                } else {
-                    *sub = Subscription { frames, stats, every, denoised };
-                    Ok(None)
-                }
-            }
-            ClientMessage::Play { anim, speed } => play(entry, &anim, speed).await.map(|_| None),
-            ClientMessage::Pause => entry.handle.pause().map(|_| None),
-            ClientMessage::Update(req) => update(state, entry, req)
-                .await
-                .map(|running| Some(ServerMessage::Updated { technique: running.technique, denoise: running.denoise })),
-        };
-    match outcome {
+        }
+        ClientMessage::Play { anim, speed } => play(entry, &anim, speed).await.map(|_| None),
+        ClientMessage::Pause => entry.handle.pause().map(|_| None),
+        ClientMessage::Update(req) => update(state, entry, req)
+            .await
+            .map(|running| Some(ServerMessage::Updated { technique: running.technique, denoise: running.denoise })),
+    };
+    ready(match outcome {
         Ok(reply) => reply.map(|m| text(&m)),
         Err(e) => Some(error_message(&e)),
-    }
+    })
 }
 
 /// Parses a client message. Serde reads a message tagged by `type` through a buffer, which

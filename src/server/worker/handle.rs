@@ -19,6 +19,9 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use tokio::sync::{oneshot, watch};
 
+/// Where a queued command's answer arrives.
+pub type Answer<T> = oneshot::Receiver<Result<T, ApiError>>;
+
 /// The handle the server keeps for a session.
 pub struct SessionHandle {
     commands: Mutex<mpsc::SyncSender<Command>>,
@@ -120,27 +123,39 @@ impl SessionHandle {
     }
 
     pub async fn edits(&self, batch: Vec<Edit>) -> Result<EditsAccepted, ApiError> {
-        self.ask(|reply| Command::Edits { batch, reply }).await
+        self.send_edits(batch)?.await.map_err(|_| gone())?
+    }
+
+    /// [`SessionHandle::edits`]'s request alone, queued at once: the acknowledgement comes on
+    /// the receiver, so a client's next message need not wait for it.
+    pub fn send_edits(&self, batch: Vec<Edit>) -> Result<Answer<EditsAccepted>, ApiError> {
+        let (reply, answer) = oneshot::channel();
+        self.send(Command::Edits { batch, reply })?;
+        Ok(answer)
     }
 
     /// Asks for a tick: joins the queued one if there is one (it has not started, so it will
     /// include everything this client sent before), else queues a new one.
     pub async fn tick(&self) -> Result<TickStats, ApiError> {
+        self.request_tick()?.await.map_err(|_| gone())?
+    }
+
+    /// [`SessionHandle::tick`]'s request alone, at once: the answer comes on the receiver,
+    /// which a client that reads the tick's frame and stats elsewhere may drop.
+    pub fn request_tick(&self) -> Result<Answer<TickStats>, ApiError> {
         if let Some(reason) = self.failure() {
             return Err(failed(&reason));
         }
         let (reply, answer) = oneshot::channel();
-        {
-            let mut waiters = self.tick_waiters.lock().map_err(|_| gone())?;
-            waiters.push(reply);
-            if waiters.len() == 1 {
-                if let Err(e) = self.send(Command::Tick) {
-                    waiters.clear();
-                    return Err(e);
-                }
+        let mut waiters = self.tick_waiters.lock().map_err(|_| gone())?;
+        waiters.push(reply);
+        if waiters.len() == 1 {
+            if let Err(e) = self.send(Command::Tick) {
+                waiters.clear();
+                return Err(e);
             }
         }
-        answer.await.map_err(|_| gone())?
+        Ok(answer)
     }
 
     /// Plays an animation on the server's clock from `playing.clock_s`; it is validated

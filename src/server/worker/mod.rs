@@ -36,7 +36,7 @@ use std::time::{Duration, Instant};
 use tokio::sync::{oneshot, watch};
 
 mod handle;
-pub use handle::SessionHandle;
+pub use handle::{Answer, SessionHandle};
 
 /// Commands a session's queue holds before new ones are refused with 429.
 pub const COMMAND_QUEUE: usize = 64;
@@ -119,7 +119,8 @@ pub fn failed(reason: &str) -> ApiError {
     )
 }
 
-fn gone() -> ApiError {
+/// 410: the session's worker has shut down.
+pub fn gone() -> ApiError {
     ApiError::new(StatusCode::GONE, "session_closed", "the session has shut down")
 }
 
@@ -362,86 +363,134 @@ impl Playing {
     }
 }
 
+/// What serving one command asks of the loop.
+enum Step {
+    Continue,
+    /// A client-driven tick may run now.
+    Tick,
+    Shutdown,
+}
+
+/// The command loop's schedule: the animation playing, when the next scheduled tick is due,
+/// and when a client-driven tick held back by the rate cap may run.
+struct Schedule {
+    tick_hz: Option<f32>,
+    playing: Option<Playing>,
+    next_tick: Option<Instant>,
+    client_tick: Option<Instant>,
+}
+
 /// The command loop: serve commands; tick on schedule while `tick_hz` is set or an animation
 /// plays (from the start when a restored session was playing one), and for clients no
 /// sooner than the rate cap allows.
+///
+/// Pending work collapses: before any tick runs, every command already queued is served, so
+/// the edits sent while the last tick ran are acknowledged at once and all ride on this tick,
+/// and the tick requests among them join it. However fast clients send, a request waits for
+/// at most the tick in progress and the next one, never for a queue of ticks.
 fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, restored: Option<PlayingAnimation>) {
-    let mut playing = restored.map(|from| Playing { from, started: Instant::now() });
-    let mut next_tick = (tick_hz.is_some() || playing.is_some()).then(Instant::now);
-    let mut client_tick: Option<Instant> = None;
-    while let Some(wake) = wait(&rx, next_tick, client_tick) {
-        match wake {
-            Wake::Command(Command::Edits { batch, reply }) => {
-                let _ = reply.send(w.queue(batch));
-            }
-            Wake::Command(Command::Tick) => {
-                let due = w.client_tick_due();
-                if due <= Instant::now() {
-                    w.tick_for_waiters();
-                } else {
-                    client_tick = Some(due);
-                }
-            }
+    let playing = restored.map(|from| Playing { from, started: Instant::now() });
+    let next_tick = (tick_hz.is_some() || playing.is_some()).then(Instant::now);
+    let mut schedule = Schedule { tick_hz, playing, next_tick, client_tick: None };
+    while let Some(wake) = wait(&rx, schedule.next_tick, schedule.client_tick) {
+        let scheduled = match wake {
+            Wake::Command(c) => match serve_command(&mut w, &mut schedule, c) {
+                Step::Continue => continue,
+                Step::Tick => false,
+                Step::Shutdown => break,
+            },
             Wake::ClientTick => {
-                client_tick = None;
-                w.tick_for_waiters();
+                schedule.client_tick = None;
+                false
             }
-            Wake::Command(Command::Play { playing: p, reply }) => {
-                let checked = w.live().and_then(|l| {
-                    p.animation.validate(l.session.scene()).map_err(|e| ApiError::invalid(format!("anim: {e}")))
-                });
-                if checked.is_ok() {
-                    playing = Some(Playing { from: *p, started: Instant::now() });
-                    next_tick.get_or_insert_with(Instant::now);
-                }
-                let _ = reply.send(checked);
-            }
-            Wake::Command(Command::Snapshot { reply }) => {
-                let parts = w.live().map(|l| SnapshotParts {
-                    scene: l.session.scene().desc().clone(),
-                    running: Running::of(&l.session),
-                    progress: l.session.progress(),
-                    animation: playing.as_ref().map(Playing::now),
-                });
-                let _ = reply.send(parts);
-            }
-            Wake::Command(Command::Pause) => {
-                playing = None;
-                if tick_hz.is_none() {
-                    next_tick = None;
-                }
-            }
-            Wake::Command(Command::Update { update, bytes, server_memory, reply }) => {
-                let _ = reply.send(w.update(update, bytes, server_memory));
-            }
-            Wake::Command(Command::Scene { reply }) => {
-                let _ = reply.send(w.live().map(|l| l.session.scene().desc().clone()));
-            }
-            Wake::Command(Command::Pick { x, y, reply }) => {
-                let picked = w.live().map(|l| crate::scene::accel::pick(l.session.scene(), l.session.accel(), x, y));
-                let _ = reply.send(picked);
-            }
-            Wake::Command(Command::Shutdown) => break,
-            #[cfg(test)]
-            Wake::Command(Command::Panic) => w.panic_in_a_turn(),
-            Wake::Scheduled => {
-                // Advance the animation, then tick.
-                if let Some(p) = &playing {
-                    let now = p.now();
-                    if w.queue(now.animation.edits_at(now.clock_s as f32)).is_err() {
-                        playing = None;
-                    }
-                }
-                if w.scheduled_tick().is_err() {
-                    next_tick = None;
-                    playing = None;
-                    continue;
-                }
-                let hz = tick_hz.unwrap_or(DEFAULT_PLAY_HZ);
-                let period = Duration::try_from_secs_f32(1.0 / hz).unwrap_or(MAX_PERIOD);
-                let now = Instant::now();
-                next_tick = next_tick.map(|at| if at + period > now { at + period } else { now + period });
+            Wake::Scheduled => true,
+        };
+        // Collapse what queued up behind the last tick before running this one.
+        while let Ok(c) = rx.try_recv() {
+            if let Step::Shutdown = serve_command(&mut w, &mut schedule, c) {
+                return;
             }
         }
+        if scheduled {
+            scheduled_tick(&mut w, &mut schedule);
+        } else {
+            w.tick_for_waiters();
+        }
+        schedule.client_tick = None;
     }
+}
+
+/// Serves one command; a tick request is left to the loop (now, or at the rate cap's instant).
+fn serve_command(w: &mut Worker, schedule: &mut Schedule, command: Command) -> Step {
+    match command {
+        Command::Edits { batch, reply } => {
+            let _ = reply.send(w.queue(batch));
+        }
+        Command::Tick => {
+            let due = w.client_tick_due();
+            if due <= Instant::now() {
+                return Step::Tick;
+            }
+            schedule.client_tick = Some(due);
+        }
+        Command::Play { playing: p, reply } => {
+            let checked = w.live().and_then(|l| {
+                p.animation.validate(l.session.scene()).map_err(|e| ApiError::invalid(format!("anim: {e}")))
+            });
+            if checked.is_ok() {
+                schedule.playing = Some(Playing { from: *p, started: Instant::now() });
+                schedule.next_tick.get_or_insert_with(Instant::now);
+            }
+            let _ = reply.send(checked);
+        }
+        Command::Snapshot { reply } => {
+            let parts = w.live().map(|l| SnapshotParts {
+                scene: l.session.scene().desc().clone(),
+                running: Running::of(&l.session),
+                progress: l.session.progress(),
+                animation: schedule.playing.as_ref().map(Playing::now),
+            });
+            let _ = reply.send(parts);
+        }
+        Command::Pause => {
+            schedule.playing = None;
+            if schedule.tick_hz.is_none() {
+                schedule.next_tick = None;
+            }
+        }
+        Command::Update { update, bytes, server_memory, reply } => {
+            let _ = reply.send(w.update(update, bytes, server_memory));
+        }
+        Command::Scene { reply } => {
+            let _ = reply.send(w.live().map(|l| l.session.scene().desc().clone()));
+        }
+        Command::Pick { x, y, reply } => {
+            let picked = w.live().map(|l| crate::scene::accel::pick(l.session.scene(), l.session.accel(), x, y));
+            let _ = reply.send(picked);
+        }
+        Command::Shutdown => return Step::Shutdown,
+        #[cfg(test)]
+        Command::Panic => w.panic_in_a_turn(),
+    }
+    Step::Continue
+}
+
+/// The scheduled tick: advance the animation, tick, and set the next one a period on (or a
+/// period from now, when ticks run late: late ticks are skipped, not made up).
+fn scheduled_tick(w: &mut Worker, schedule: &mut Schedule) {
+    if let Some(p) = &schedule.playing {
+        let now = p.now();
+        if w.queue(now.animation.edits_at(now.clock_s as f32)).is_err() {
+            schedule.playing = None;
+        }
+    }
+    if w.scheduled_tick().is_err() {
+        schedule.next_tick = None;
+        schedule.playing = None;
+        return;
+    }
+    let hz = schedule.tick_hz.unwrap_or(DEFAULT_PLAY_HZ);
+    let period = Duration::try_from_secs_f32(1.0 / hz).unwrap_or(MAX_PERIOD);
+    let now = Instant::now();
+    schedule.next_tick = schedule.next_tick.map(|at| if at + period > now { at + period } else { now + period });
 }
