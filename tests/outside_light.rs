@@ -106,6 +106,12 @@ fn plane_under_sun(travel: [f32; 3], irradiance: [f32; 3]) -> Scene {
     }))
 }
 
+/// The edit that makes the delta sun "sun" travel along `direction` with irradiance `e`.
+fn sun_edit(direction: [f32; 3], e: [f32; 3]) -> Edit {
+    let emitter = EmitterDesc::Directional { direction, irradiance: Rgb::from(e), angle_deg: 0.0 };
+    Edit::Light { name: "sun".into(), transform: None, emitter: Some(emitter) }
+}
+
 /// The way a sun at `deg` from the plane's normal (tilted towards +X) travels.
 fn travel_at(deg: f32) -> [f32; 3] {
     let t = deg.to_radians();
@@ -131,24 +137,8 @@ fn a_plane_under_a_delta_sun_shows_rho_over_pi_e_cos_theta_in_every_technique() 
     let e = [2.0f32, 3.0, 4.0];
     let e2 = [4.0f32, 1.0, 2.0];
     for config in small_techniques() {
-        let turn = Edit::Light {
-            name: "sun".into(),
-            transform: None,
-            emitter: Some(EmitterDesc::Directional {
-                direction: travel_at(60.0),
-                irradiance: Rgb::from(e),
-                angle_deg: 0.0,
-            }),
-        };
-        let brighten = Edit::Light {
-            name: "sun".into(),
-            transform: None,
-            emitter: Some(EmitterDesc::Directional {
-                direction: travel_at(60.0),
-                irradiance: Rgb::from(e2),
-                angle_deg: 0.0,
-            }),
-        };
+        let turn = sun_edit(travel_at(60.0), e);
+        let brighten = sun_edit(travel_at(60.0), e2);
         let frames = run(plane_under_sun(travel_at(40.0), e), &config, 7, 1, vec![vec![turn], vec![brighten]]);
         let worst =
             [worst_pixel(&frames[0], e, 40.0), worst_pixel(&frames[1], e, 60.0), worst_pixel(&frames[2], e2, 60.0)];
@@ -193,11 +183,7 @@ fn a_sun_turn_matches_a_session_created_with_the_sun_already_there() {
     let short = [cos * to[0] - sin * to[2], to[1], sin * to[0] + cos * to[2]];
     let tol = Tolerance { channel: 0.025, block: 0.14, floor: 0.003 };
     for config in small_techniques() {
-        let turn = Edit::Light {
-            name: "sun".into(),
-            transform: None,
-            emitter: Some(EmitterDesc::Directional { direction: to, irradiance: Rgb::splat(3.0), angle_deg: 0.0 }),
-        };
+        let turn = sun_edit(to, [3.0; 3]);
         let turned = run(courtyard(from), &config, 11, 6, vec![vec![turn]]);
         let twin = run(courtyard(to), &config, 12, 6, vec![]);
         let label = config.id();
