@@ -9,11 +9,14 @@ pub enum ImageFormat {
     Png,
     Jpeg,
     Exr,
+    /// Raw linear radiance: little-endian f32 R, G, B per pixel, rows from the top, no header
+    /// (the size travels beside it), for clients that compute on frames (numpy).
+    F32,
 }
 
 #[derive(Debug, Error)]
 pub enum EncodeError {
-    #[error("unsupported image extension '{0}' (use .png, .jpg or .exr)")]
+    #[error("unsupported image extension '{0}' (use .png, .jpg, .exr or .f32)")]
     UnknownFormat(String),
     #[error("encoding {format:?}: {message}")]
     Encode { format: ImageFormat, message: String },
@@ -27,6 +30,7 @@ impl ImageFormat {
             "png" => Ok(ImageFormat::Png),
             "jpg" | "jpeg" => Ok(ImageFormat::Jpeg),
             "exr" => Ok(ImageFormat::Exr),
+            "f32" => Ok(ImageFormat::F32),
             other => Err(EncodeError::UnknownFormat(other.to_string())),
         }
     }
@@ -40,6 +44,7 @@ impl ImageFormat {
             ImageFormat::Png => "image/png",
             ImageFormat::Jpeg => "image/jpeg",
             ImageFormat::Exr => "image/x-exr",
+            ImageFormat::F32 => "application/octet-stream",
         }
     }
 }
@@ -82,6 +87,14 @@ pub fn encode(img: &LinearImage, format: ImageFormat, exposure_ev: f32) -> Resul
                 .write()
                 .to_buffered(std::io::Cursor::new(&mut out))
                 .map_err(|e| err(e.to_string()))?;
+        }
+        ImageFormat::F32 => {
+            out.reserve(img.pixels.len() * 12);
+            for p in &img.pixels {
+                for c in [p.r, p.g, p.b] {
+                    out.extend_from_slice(&c.to_le_bytes());
+                }
+            }
         }
     }
     Ok(out)

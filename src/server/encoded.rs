@@ -30,7 +30,8 @@ impl EncodingKey {
     pub fn new(frame: &PublishedFrame, format: ImageFormat, raw: bool, exposure: f32) -> EncodingKey {
         // A session without a denoised image has one image: raw or not, the bytes are the same.
         let raw = raw && frame.denoised.is_some();
-        let exposure = if format == ImageFormat::Exr { 0.0 } else { exposure };
+        let linear = matches!(format, ImageFormat::Exr | ImageFormat::F32);
+        let exposure = if linear { 0.0 } else { exposure };
         let image_tick = if frame.denoised.is_some() && !raw { frame.denoised_tick } else { frame.image_tick };
         EncodingKey { image_tick, accumulation_id: frame.accumulation_id, format, raw, exposure }
     }

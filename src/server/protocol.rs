@@ -257,6 +257,7 @@ pub enum FrameFormat {
     Png,
     Jpg,
     Exr,
+    F32,
     None,
 }
 
@@ -361,6 +362,7 @@ impl FrameHeader {
             FrameFormat::Png => 0,
             FrameFormat::Jpg => 1,
             FrameFormat::Exr => 2,
+            FrameFormat::F32 => 3,
             FrameFormat::None => 255,
         };
         b[24..28].copy_from_slice(&self.width.to_le_bytes());
@@ -379,6 +381,7 @@ impl FrameHeader {
             0 => FrameFormat::Png,
             1 => FrameFormat::Jpg,
             2 => FrameFormat::Exr,
+            3 => FrameFormat::F32,
             _ => return None,
         };
         Some(FrameHeader {

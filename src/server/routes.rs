@@ -342,6 +342,8 @@ pub async fn get_frame(
     h.insert("x-relume-tick", HeaderValue::from(frame.tick));
     h.insert("x-relume-accumulation-id", HeaderValue::from(frame.accumulation_id));
     h.insert("x-relume-spp", HeaderValue::from(frame.spp));
+    h.insert("x-relume-width", HeaderValue::from(frame.image.width));
+    h.insert("x-relume-height", HeaderValue::from(frame.image.height));
     Ok(resp)
 }
 
@@ -351,7 +353,10 @@ fn frame_format(file: &str) -> Result<ImageFormat, ApiError> {
         "frame.png" => Ok(ImageFormat::Png),
         "frame.jpg" => Ok(ImageFormat::Jpeg),
         "frame.exr" => Ok(ImageFormat::Exr),
-        _ => Err(ApiError::not_found(format!("no resource '{file}' (frames are frame.png, frame.jpg or frame.exr)"))),
+        "frame.f32" => Ok(ImageFormat::F32),
+        _ => Err(ApiError::not_found(format!(
+            "no resource '{file}' (frames are frame.png, frame.jpg, frame.exr or frame.f32)"
+        ))),
     }
 }
 

@@ -149,6 +149,7 @@ async fn send_frame(
         FrameFormat::Png => ImageFormat::Png,
         FrameFormat::Jpg => ImageFormat::Jpeg,
         FrameFormat::Exr => ImageFormat::Exr,
+        FrameFormat::F32 => ImageFormat::F32,
         FrameFormat::None => return Ok(()),
     };
     let header = FrameHeader {

@@ -155,6 +155,7 @@ fn render_animation(args: &RenderArgs, anim_path: &std::path::Path) -> Result<()
         ImageFormat::Png => "png",
         ImageFormat::Jpeg => "jpg",
         ImageFormat::Exr => "exr",
+        ImageFormat::F32 => "f32",
     };
     let mut total_ms = 0.0;
     pool.install(|| -> Result<()> {
