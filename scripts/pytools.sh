@@ -2,7 +2,7 @@
 # Installs the Python packages the tests use into .deps/pytools (outside git), only when the
 # pinned set is not there yet: kubernetes-validate, which checks deploy/kubernetes/ against the
 # Kubernetes API schemas it carries (offline once installed; tests/deploy.rs), and what the
-# Python client (clients/python) needs to run its tests (tests/python_client.rs). `pip
+# Python client (clients/python) needs to run its tests (tests/clients.rs). `pip
 # --target` leaves the system's Python untouched.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)

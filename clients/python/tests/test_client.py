@@ -1,4 +1,4 @@
-"""The Python client against a real server (RELUME_URL, started by tests/python_client.rs)."""
+"""The Python client against a real server (RELUME_URL, started by tests/clients.rs)."""
 import asyncio
 import dataclasses
 import os
@@ -56,7 +56,7 @@ def test_models_are_in_step_with_the_openapi_description():
 
 @pytest.fixture
 def client():
-    assert URL, "RELUME_URL is not set: run this through tests/python_client.rs"
+    assert URL, "RELUME_URL is not set: run this through tests/clients.rs"
     with Client(URL) as c:
         yield c
 
