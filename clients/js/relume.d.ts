@@ -50,6 +50,8 @@ export class Client {
   constructor(url?: string, options?: { token?: string | null });
   url: string;
   token: string | null;
+  raw(method: string, path: string, body?: unknown, init?: RequestInit): Promise<Response>;
+  request(method: string, path: string, body?: unknown, init?: RequestInit): Promise<any>;
   techniques(): Promise<Record<string, unknown>>;
   scenes(): Promise<Array<Record<string, unknown>>>;
   createSession(scene: string | Record<string, unknown>, options?: Record<string, unknown>): Promise<Session>;

@@ -51,11 +51,14 @@ export class Client {
     this.token = token;
   }
 
-  async raw(method, path, body) {
+  /** Sends a request (`body` as JSON; `init` more fetch options, such as `keepalive`) and
+   * resolves to the response, or rejects with a {@link RelumeError} for an error answer. */
+  async raw(method, path, body, init = {}) {
     const headers = {};
     if (body !== undefined) headers["content-type"] = "application/json";
     if (this.token) headers.authorization = `Bearer ${this.token}`;
     const response = await fetch(this.url + path, {
+      ...init,
       method,
       headers,
       body: body === undefined ? undefined : JSON.stringify(body),
@@ -71,8 +74,10 @@ export class Client {
     return response;
   }
 
-  async request(method, path, body) {
-    return (await this.raw(method, path, body)).json();
+  /** As {@link Client#raw}, resolving to the answer's JSON (its text when it is not JSON). */
+  async request(method, path, body, init = {}) {
+    const response = await this.raw(method, path, body, init);
+    return response.headers.get("content-type")?.includes("json") ? response.json() : response.text();
   }
 
   techniques() { return this.request("GET", "/v1/techniques"); }

@@ -240,6 +240,7 @@ pub fn app(state: Arc<AppState>) -> Router {
     let app = Router::new()
         .route("/", get(routes::viewer_page))
         .route("/viewer.js", get(routes::viewer_script))
+        .route("/relume.js", get(routes::client_module))
         .route("/viewer.css", get(routes::viewer_style))
         .route("/healthz", get(routes::healthz))
         .route("/metrics", get(routes::metrics))

@@ -445,6 +445,12 @@ pub async fn viewer_script() -> Response {
     ([(header::CONTENT_TYPE, "text/javascript; charset=utf-8")], include_str!("viewer/viewer.js")).into_response()
 }
 
+/// The JavaScript client module (`clients/js/relume.js`), which the viewer imports.
+pub async fn client_module() -> Response {
+    ([(header::CONTENT_TYPE, "text/javascript; charset=utf-8")], include_str!("../../clients/js/relume.js"))
+        .into_response()
+}
+
 pub async fn viewer_style() -> Response {
     ([(header::CONTENT_TYPE, "text/css; charset=utf-8")], include_str!("viewer/viewer.css")).into_response()
 }

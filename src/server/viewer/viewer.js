@@ -2,20 +2,17 @@
 // /v1/techniques), or on a dropped .glb; watch frames over the WebSocket with per-tick plots;
 // click to pick an object or light (GET .../pick), drag to move it; play the scene's
 // animation. Plain JS, no build step. ?token=... is passed to the API.
-"use strict";
+import { Client } from "/relume.js";
 const $ = (id) => document.getElementById(id);
 const token = new URLSearchParams(location.search).get("token");
 const state = { id: null, ws: null, scene: null, frames: 0, lastUrl: null, extent: 1, pending: null, history: [] };
 window.relume = state; // for tests and curious people
 
-function api(path, options = {}) {
-  const headers = Object.assign({ "content-type": "application/json" }, options.headers || {});
-  if (token) headers.authorization = "Bearer " + token;
-  return fetch(path, Object.assign({}, options, { headers })).then(async (r) => {
-    const body = r.headers.get("content-type")?.includes("json") ? await r.json() : await r.text();
-    if (!r.ok) throw new Error(body.detail || body.error || r.statusText);
-    return body;
-  });
+// Every HTTP call goes through relume's own JavaScript client (clients/js/relume.js, served at
+// /relume.js): the viewer is its first user.
+const client = new Client(location.origin, { token });
+function api(path, { method = "GET", body, keepalive } = {}) {
+  return client.request(method, path, body, keepalive ? { keepalive } : {});
 }
 
 function status(text) { $("status").textContent = text; }
@@ -262,7 +259,7 @@ async function start(glb) {
   if ($("denoise").value) body.denoise = { quality: $("denoise").value };
   status("starting…");
   try {
-    const s = await api("/v1/sessions", { method: "POST", body: JSON.stringify(body) });
+    const s = await api("/v1/sessions", { method: "POST", body });
     state.id = s.id;
     state.scene = await api(`/v1/sessions/${s.id}/scene`);
     const c = state.scene.camera;
@@ -287,7 +284,7 @@ async function switchTechnique() {
   if (!state.id) return;
   const denoise = $("denoise").value ? { quality: $("denoise").value } : null;
   try {
-    const s = await api(`/v1/sessions/${state.id}`, { method: "PATCH", body: JSON.stringify({ technique: techniqueConfig(), denoise }) });
+    const s = await api(`/v1/sessions/${state.id}`, { method: "PATCH", body: { technique: techniqueConfig(), denoise } });
     state.history = [];
     status(`session ${s.id} — now running ${s.technique.id}`);
   } catch (e) {
