@@ -350,12 +350,6 @@ impl Scene {
         self.desc.lights.get(l).map_or(Vec3::ZERO, |d| d.transform.translation())
     }
 
-    /// Radiance arriving along a ray that leaves the scene in unit direction `dir`, from every
-    /// light from outside.
-    pub fn escaped(&self, dir: Vec3) -> crate::core::Rgb {
-        self.infinite_lights.iter().fold(crate::core::Rgb::BLACK, |sum, &l| sum + self.lights[l].geometry.escaped(dir))
-    }
-
     /// Replaces the environment's radiance (the scene has one; validated by the caller).
     pub fn set_environment(&mut self, env: EnvironmentDesc) {
         if let Some(i) = self.environment_light() {
