@@ -239,3 +239,47 @@ async fn graceful_shutdown_completes_with_sessions_and_sockets_open() {
     .await;
     assert!(end.is_ok(), "socket still open after shutdown");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_flood_of_edits_and_ticks_is_merged_acknowledged_and_ends_at_its_last_edit() {
+    // Property: a client that sends edits and tick requests far faster than the session ticks
+    // (open loop: it never waits for an answer) gets every batch acknowledged, in order, its
+    // edits merged into few ticks, and ends where a twin session given only the last edit
+    // ends. Run against the loop before pending work collapsed, which waited for each tick in
+    // turn, it failed.
+    const N: usize = 300;
+    let s = TestServer::start(None, Limits::default()).await;
+    let create = json!({"scene": "bunnies-1", "width": 32, "height": 32, "technique": {"id": "path"}});
+    let id = s.session(create.clone()).await;
+    let mut ws = connect(&s, &id).await;
+    send(&mut ws, json!({"type": "subscribe", "frames": "none", "stats": true})).await;
+    for k in 0..N {
+        send(&mut ws, json!({"type": "edits", "edits": [bunny_at(100.0 + k as f32)]})).await;
+        send(&mut ws, json!({"type": "tick"})).await;
+    }
+    // Stats come with the newest frame only: ticks this reader did not see are counted in
+    // `frames_dropped`, so seen + dropped is every tick the session ran.
+    let (mut acks, mut seen, mut dropped, mut applied) = (Vec::new(), 0, 0, 0);
+    while acks.len() < N || applied < N {
+        let m = next_text(&mut ws).await;
+        match m["type"].as_str() {
+            Some("edits_accepted") => acks.push(m["seq"].as_u64().expect("seq") as usize),
+            Some("stats") => {
+                seen += 1;
+                dropped = m["frames_dropped"].as_u64().expect("dropped") as usize;
+                applied = m["stats"]["edits_applied_through"].as_u64().expect("applied") as usize;
+            }
+            _ => panic!("unexpected message {m}"),
+        }
+    }
+    assert_eq!(acks, (1..=N).collect::<Vec<_>>(), "every batch is acknowledged, in order");
+    let ticks = seen + dropped;
+    assert!(ticks < N / 2, "{ticks} ticks for {N} requests: the flood was not merged");
+    let twin = s.session(create).await;
+    s.post_json(&format!("/v1/sessions/{twin}/edits"), &json!({"edits": [bunny_at(100.0 + (N - 1) as f32)]})).await;
+    s.post_json(&format!("/v1/sessions/{twin}/tick"), &json!({})).await;
+    let flooded = s.get_json(&format!("/v1/sessions/{id}/scene")).await;
+    let only_last = s.get_json(&format!("/v1/sessions/{twin}/scene")).await;
+    assert_eq!(flooded["objects"], only_last["objects"], "the flood did not end at its last edit");
+    s.shutdown().await.unwrap();
+}

@@ -12,7 +12,9 @@
 //! their messages, but reading never waits for a tick: a batch is queued at once and
 //! acknowledged when the worker takes it (before its next tick), and a `tick` joins the
 //! session's pending tick, so a client sending faster than the session ticks has its edits
-//! merged into the next tick instead of queueing behind ticks.
+//! merged into the next tick instead of queueing behind ticks. With [`IN_FLIGHT`] replies
+//! outstanding, the socket is not read until one is sent: the client's own sends slow down,
+//! and nothing it sent is refused.
 use super::encoded::EncodingKey;
 use super::error::ApiError;
 use super::protocol::EditsAccepted;
@@ -41,6 +43,11 @@ pub const CLOSE_SESSION_GONE: u16 = 4410;
 /// JSON `{error: "session_failed", detail}` with the failure. The session stays inspectable over
 /// HTTP until it is deleted.
 pub const CLOSE_SESSION_FAILED: u16 = 4409;
+
+/// Replies a socket may wait for before the server stops reading it: a client that sends
+/// faster than its session takes commands is slowed by its own socket (TCP backpressure), and
+/// never fills the session's command queue ([`super::worker::COMMAND_QUEUE`]) alone.
+const IN_FLIGHT: usize = 32;
 
 /// How often the server pings an open socket; a pong counts as activity, so an open viewer
 /// keeps its session from expiring.
@@ -183,7 +190,7 @@ async fn serve(mut socket: WebSocket, state: Shared, entry: Arc<SessionEntry>) {
     let mut replies: FuturesOrdered<Reply> = FuturesOrdered::new();
     loop {
         tokio::select! {
-            incoming = socket.recv() => {
+            incoming = socket.recv(), if replies.len() < IN_FLIGHT => {
                 state.touch(&entry);
                 let reply = match incoming {
                     Some(Ok(Message::Text(t))) => handle(&state, &entry, &mut sub, t.as_bytes()).await,
