@@ -5,27 +5,61 @@
 //! `.deps/nodetools` (scripts/nodetools.sh).
 mod common;
 use common::process::Served;
+use std::io::Read;
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).to_path_buf()
 }
 
+/// How long a client's whole test run may take before it is stopped and failed with what it
+/// printed: a bound against a run that hangs (an open socket keeps Node's runner waiting), far
+/// above the few seconds a run takes.
+const RUN_LIMIT: Duration = Duration::from_secs(300);
+
 /// Runs a client's test `command` in `clients/DIR` against a fresh server (its URL in
 /// `RELUME_URL`), and returns what it printed; a failing run fails the test with its report.
 fn run_against_a_server(dir: &str, command: &mut Command) -> String {
     let served = Served::start(&[]);
-    let output = command
+    let mut child = command
         .current_dir(root().join("clients").join(dir))
         .env("RELUME_URL", served.url(""))
-        .output()
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
         .expect("the client's test runner starts (scripts/test.sh installs it)");
-    let report = String::from_utf8_lossy(&output.stdout).to_string();
-    println!("{report}{}", String::from_utf8_lossy(&output.stderr));
-    assert!(output.status.success(), "the {dir} client's tests failed:\n{report}");
+    let (stdout, stderr) = (drain(child.stdout.take()), drain(child.stderr.take()));
+    let deadline = Instant::now() + RUN_LIMIT;
+    let status = loop {
+        if let Some(status) = child.try_wait().expect("wait") {
+            break Some(status);
+        }
+        if Instant::now() > deadline {
+            let _ = child.kill();
+            let _ = child.wait();
+            break None;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let report = stdout.join().unwrap_or_default();
+    println!("{report}{}", stderr.join().unwrap_or_default());
+    let status = status.unwrap_or_else(|| panic!("the {dir} client's tests ran past {RUN_LIMIT:?}:\n{report}"));
+    assert!(status.success(), "the {dir} client's tests failed:\n{report}");
     served.terminate();
     report
+}
+
+/// Reads a child's pipe to its end on a thread of its own (so the child never blocks on it).
+fn drain(pipe: Option<impl Read + Send + 'static>) -> std::thread::JoinHandle<String> {
+    std::thread::spawn(move || {
+        let mut text = String::new();
+        if let Some(mut p) = pipe {
+            let _ = p.read_to_string(&mut text);
+        }
+        text
+    })
 }
 
 #[test]

@@ -75,6 +75,8 @@ export class Socket {
   onTick: (tick: SocketTick) => void;
   onAck: (seq: number) => void;
   onError: (error: RelumeError) => void;
+  /** The close code (4410 session deleted, 4409 session failed, 1001 server shutting down) and reason. */
+  onClose: (code: number, reason: string) => void;
   sendEdits(edits: Edit[]): void;
   sendTick(): void;
   close(): void;

@@ -138,7 +138,9 @@ export class Session {
 }
 
 /** A session's WebSocket: `send*` queue edits and ticks at once; `onTick` gets each published
- * tick with its frame, `onAck` each edit batch's `seq`, `onError` each error message. */
+ * tick with its frame, `onAck` each edit batch's `seq`, `onError` each error message, and
+ * `onClose` the close code and reason once the socket has closed (4410: session deleted, 4409:
+ * session failed, 1001: server shutting down). */
 export class Socket {
   static open(url, frames, WebSocketImpl) {
     return new Promise((resolve, reject) => {
@@ -158,6 +160,8 @@ export class Socket {
     this.onTick = () => {};
     this.onAck = () => {};
     this.onError = (e) => { throw e; };
+    this.onClose = () => {};
+    ws.onclose = (event) => this.onClose(event.code, event.reason);
     let pending = null;
     ws.onmessage = (event) => {
       if (typeof event.data !== "string") {

@@ -629,6 +629,50 @@ mod tests {
         s.remove_session_blocking(&view.id).expect("deleted");
     }
 
+    /// Hazard: the worker collected the clients waiting for a tick after it had served the
+    /// commands queued, so a client that sent its edits and asked for a tick in between was
+    /// answered by a tick without those edits, and no later tick was asked for: a WebSocket
+    /// client waiting to see its last edit applied waited for ever. One client here sends an
+    /// edit and asks for a tick, round after round, without waiting, while the session ticks as
+    /// fast as it can; every answer must have applied the edit sent before its request. (Run
+    /// against the old order, 100 000 rounds found 131 to 1 408 such answers, in 5 runs of 5.)
+    #[test]
+    fn every_tick_answers_with_the_edits_sent_before_it_was_asked_for() {
+        use crate::scene::edits::Edit;
+        let s = state(Limits { max_tick_hz: 1e9, ..Limits::default() });
+        let create = serde_json::json!({"scene": "cornell-box", "width": 4, "height": 4, "technique": {"id": "path"}});
+        let view = s.create_session(serde_json::from_value(create).expect("request")).expect("created");
+        let handle = &s.session(&view.id).expect("listed").handle;
+        let runtime = tokio::runtime::Builder::new_current_thread().build().expect("runtime");
+        const ROUNDS: usize = 100_000;
+        // A full command queue (429) is waited out: the worker is taking commands.
+        fn until_queued<T>(send: impl Fn() -> Result<T, ApiError>) -> T {
+            loop {
+                match send() {
+                    Ok(answer) => return answer,
+                    Err(_) => std::thread::yield_now(),
+                }
+            }
+        }
+        let mut answers = Vec::new();
+        for k in 0..ROUNDS {
+            let position = Some([278.0, 273.0, -800.0 - k as f32]);
+            let edit = Edit::Camera { position, look_at: None, up: None, vfov_deg: None };
+            answers
+                .push((until_queued(|| handle.send_edits(vec![edit.clone()])), until_queued(|| handle.request_tick())));
+        }
+        let mut short = Vec::new();
+        for (ack, tick) in answers {
+            let seq = runtime.block_on(ack).expect("answered").expect("accepted").seq;
+            let applied = runtime.block_on(tick).expect("answered").expect("ticked").edits_applied_through;
+            if applied < seq {
+                short.push((seq, applied));
+            }
+        }
+        assert!(short.is_empty(), "{} ticks answered without the edit sent before them: {short:?}", short.len());
+        s.remove_session_blocking(&view.id).expect("deleted");
+    }
+
     fn view_of(s: &AppState, id: &str) -> SessionView {
         view(&s.session(id).expect("listed"))
     }

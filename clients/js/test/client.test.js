@@ -51,25 +51,38 @@ test("the socket acknowledges every batch and a tick applies them", async () => 
   const socket = await s.connect({ frames: "f32", WebSocket });
   const acks = [];
   let last = null;
+  // Every check runs inside the promise, so a failed one (or the socket closing early) ends
+  // the test with its reason instead of leaving it waiting on an open socket.
   const done = new Promise((resolve, reject) => {
-    const check = () => acks.length === 5 && last && last.stats.edits_applied_through >= 5 && resolve(last);
+    const guard = (f) => (...args) => {
+      try {
+        f(...args);
+        if (acks.length === 5 && last && last.stats.edits_applied_through >= 5) resolve(last);
+      } catch (e) {
+        reject(e);
+      }
+    };
     socket.onError = reject;
-    socket.onAck = (seq) => { acks.push(seq); check(); };
-    socket.onTick = (t) => {
+    socket.onClose = (code, reason) => reject(new Error(`socket closed (${code} ${reason}) with acks ${acks}`));
+    socket.onAck = guard((seq) => acks.push(seq));
+    socket.onTick = guard((t) => {
       assert.equal(t.frame.format, "f32");
       assert.equal(t.frame.data.length, 16 * 16 * 3);
       last = t;
-      check();
-    };
+    });
   });
-  for (let k = 0; k < 5; k++) {
-    socket.sendEdits([{ target: "camera", position: [278, 273, -800 + k] }]);
+  try {
+    for (let k = 0; k < 5; k++) {
+      socket.sendEdits([{ target: "camera", position: [278, 273, -800 + k] }]);
+      socket.sendTick();
+    }
     socket.sendTick();
+    const final = await done;
+    assert.deepEqual(acks, [1, 2, 3, 4, 5]);
+    assert.ok(final.stats.edits_applied_through >= 5);
+  } finally {
+    socket.onClose = () => {};
+    socket.close();
+    await s.delete();
   }
-  socket.sendTick();
-  const final = await done;
-  assert.deepEqual(acks, [1, 2, 3, 4, 5]);
-  assert.ok(final.stats.edits_applied_through >= 5);
-  socket.close();
-  await s.delete();
 });

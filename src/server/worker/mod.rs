@@ -41,8 +41,11 @@ pub use handle::{Answer, SessionHandle};
 /// Commands a session's queue holds before new ones are refused with 429.
 pub const COMMAND_QUEUE: usize = 64;
 
+/// A client waiting for a tick's stats.
+type Waiter = oneshot::Sender<Result<TickStats, ApiError>>;
+
 /// Clients waiting for the queued tick.
-type TickWaiters = Arc<Mutex<Vec<oneshot::Sender<Result<TickStats, ApiError>>>>>;
+type TickWaiters = Arc<Mutex<Vec<Waiter>>>;
 
 /// How many ticks' stats a session keeps.
 pub const STATS_HISTORY: usize = 256;
@@ -153,30 +156,12 @@ struct Worker {
 }
 
 impl Worker {
-    /// Runs a tick for the clients waiting for one, if any are (a scheduled tick may have
-    /// answered them already), and answers them all.
-    fn tick_for_waiters(&mut self) {
-        let waiters = self.take_waiters();
-        if !waiters.is_empty() {
-            let _ = self.tick_answering(waiters);
-        }
-    }
-
-    /// A scheduled tick; clients waiting for a tick get its stats too.
-    fn scheduled_tick(&mut self) -> Result<TickStats, ApiError> {
-        let waiters = self.take_waiters();
-        self.tick_answering(waiters)
-    }
-
-    fn take_waiters(&self) -> Vec<oneshot::Sender<Result<TickStats, ApiError>>> {
+    fn take_waiters(&self) -> Vec<Waiter> {
         self.tick_waiters.lock().map(|mut w| std::mem::take(&mut *w)).unwrap_or_default()
     }
 
     /// Runs one tick and gives its result to every one of `waiters` too.
-    fn tick_answering(
-        &mut self,
-        waiters: Vec<oneshot::Sender<Result<TickStats, ApiError>>>,
-    ) -> Result<TickStats, ApiError> {
+    fn tick_answering(&mut self, waiters: Vec<Waiter>) -> Result<TickStats, ApiError> {
         let result = self.tick();
         for reply in waiters {
             let _ = reply.send(result.clone());
@@ -405,18 +390,26 @@ fn serve(mut w: Worker, rx: mpsc::Receiver<Command>, tick_hz: Option<f32>, resto
             }
             Wake::Scheduled => true,
         };
-        // Collapse what queued up behind the last tick before running this one.
+        // The clients this tick answers are those waiting now: each sent its edits before it
+        // asked, so serving what is queued after taking them gives the tick all their edits.
+        let waiters = w.take_waiters();
+        // Collapse what queued up behind the last tick before running this one. A tick asked
+        // for from here on is not in `waiters`: it is left to the next tick.
+        let mut asked = false;
         while let Ok(c) = rx.try_recv() {
-            if let Step::Shutdown = serve_command(&mut w, &mut schedule, c) {
-                return;
+            match serve_command(&mut w, &mut schedule, c) {
+                Step::Shutdown => return,
+                Step::Tick => asked = true,
+                Step::Continue => {}
             }
         }
         if scheduled {
-            scheduled_tick(&mut w, &mut schedule);
-        } else {
-            w.tick_for_waiters();
+            scheduled_tick(&mut w, &mut schedule, waiters);
+        } else if !waiters.is_empty() {
+            let _ = w.tick_answering(waiters);
         }
-        schedule.client_tick = None;
+        let asked = asked || schedule.client_tick.is_some();
+        schedule.client_tick = asked.then(|| w.client_tick_due());
     }
 }
 
@@ -477,14 +470,14 @@ fn serve_command(w: &mut Worker, schedule: &mut Schedule, command: Command) -> S
 
 /// The scheduled tick: advance the animation, tick, and set the next one a period on (or a
 /// period from now, when ticks run late: late ticks are skipped, not made up).
-fn scheduled_tick(w: &mut Worker, schedule: &mut Schedule) {
+fn scheduled_tick(w: &mut Worker, schedule: &mut Schedule, waiters: Vec<Waiter>) {
     if let Some(p) = &schedule.playing {
         let now = p.now();
         if w.queue(now.animation.edits_at(now.clock_s as f32)).is_err() {
             schedule.playing = None;
         }
     }
-    if w.scheduled_tick().is_err() {
+    if w.tick_answering(waiters).is_err() {
         schedule.next_tick = None;
         schedule.playing = None;
         return;
