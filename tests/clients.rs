@@ -20,9 +20,11 @@ fn root() -> PathBuf {
 const RUN_LIMIT: Duration = Duration::from_secs(300);
 
 /// Runs a client's test `command` in `clients/DIR` against a fresh server (its URL in
-/// `RELUME_URL`), and returns what it printed; a failing run fails the test with its report.
+/// `RELUME_URL`) on a copy of the bundled scenes, and returns what it printed; a failing run
+/// fails the test with its report.
 fn run_against_a_server(dir: &str, command: &mut Command) -> String {
-    let served = Served::start(&[]);
+    let scenes = common::scenes_copy(&format!("client-{dir}"));
+    let served = Served::start_in(&scenes, &[]);
     let mut child = command
         .current_dir(root().join("clients").join(dir))
         .env("RELUME_URL", served.url(""))
@@ -48,6 +50,7 @@ fn run_against_a_server(dir: &str, command: &mut Command) -> String {
     let status = status.unwrap_or_else(|| panic!("the {dir} client's tests ran past {RUN_LIMIT:?}:\n{report}"));
     assert!(status.success(), "the {dir} client's tests failed:\n{report}");
     served.terminate();
+    let _ = std::fs::remove_dir_all(&scenes);
     report
 }
 
@@ -74,7 +77,7 @@ fn the_python_client_passes_its_tests_against_a_real_server() {
             .env("PYTHONPATH", format!("{}:{}", client.display(), tools.display()))
             .env("PYTHONDONTWRITEBYTECODE", "1"),
     );
-    assert!(report.contains("5 passed"), "pytest ran other than the client's 5 tests:\n{report}");
+    assert!(report.contains("6 passed"), "pytest ran other than the client's 6 tests:\n{report}");
 }
 
 #[test]
@@ -85,5 +88,5 @@ fn the_javascript_client_passes_its_tests_against_a_real_server() {
             .args(["--test", "test/"])
             .env("RELUME_WS_MODULE", root().join(".deps/nodetools/node_modules/ws")),
     );
-    assert!(report.contains("# pass 3"), "node ran other than the client's 3 tests:\n{report}");
+    assert!(report.contains("# pass 4"), "node ran other than the client's 4 tests:\n{report}");
 }

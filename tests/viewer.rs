@@ -227,14 +227,17 @@ async fn start_and_wait(c: &fantoccini::Client) -> String {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_viewer_runs_every_technique_picks_by_click_and_takes_a_dropped_glb() {
-    let server = TestServer::start(None, Limits::default()).await;
+    let scenes = common::scenes_copy("viewer");
+    let server = TestServer::start_in(&scenes, Limits::default()).await;
     let (_driver, c) = browser().await;
     c.goto(&server.url("/")).await.unwrap();
     runs_every_technique(&c, &server).await;
     picks_by_click(&c, &server).await;
     takes_a_dropped_glb(&c, &server).await;
+    uploads_a_dropped_zip(&c, &server).await;
     c.close().await.unwrap();
     server.shutdown().await.unwrap();
+    let _ = std::fs::remove_dir_all(&scenes);
 }
 
 /// Each technique with its parameters from the registry (small counts keep it quick): the
@@ -338,4 +341,43 @@ async fn takes_a_dropped_glb(c: &fantoccini::Client, server: &TestServer) {
     assert_eq!(view["scene"], "inline", "{view}");
     let frames = dropped[1].as_u64().unwrap();
     wait_for(c, "return window.relume.frames", |v| v.as_u64() >= Some(frames + 2), "frames of the dropped scene").await;
+}
+
+/// Drop a .zip (a .gltf with its buffer): the page uploads it, lists it, and starts a session
+/// on it by name, and frames arrive.
+async fn uploads_a_dropped_zip(c: &fantoccini::Client, server: &TestServer) {
+    use common::archive::{as_gltf, zip_of, Entry};
+    let (gltf, bin) = as_gltf(&std::fs::read(common::scenes_dir().join("cornell-box.glb")).unwrap());
+    let archive = zip_of(&[Entry::File("box.gltf", &gltf), Entry::File("scene.bin", &bin)]);
+    let b64 = base64::Engine::encode(&base64::engine::general_purpose::STANDARD, archive);
+    let before = c.execute("return window.relume.id", vec![]).await.unwrap();
+    c.execute(
+        "const b = atob(arguments[0]); const u = new Uint8Array(b.length); for (let i = 0; i < b.length; i++) u[i] = b.charCodeAt(i); \
+         window.relume.startFile(new File([u], 'My Box (v2).zip'));",
+        vec![json!(b64)],
+    )
+    .await
+    .unwrap();
+    let started = wait_for(
+        c,
+        "return [window.relume.id, window.relume.frames]",
+        |v| v[0] != before && !v[0].is_null(),
+        "the uploaded scene's session",
+    )
+    .await;
+    let id = started[0].as_str().unwrap();
+    let view = server.get_json(&format!("/v1/sessions/{id}")).await;
+    assert_eq!(view["scene"], "My-Box-v2.zip", "{view}");
+    let listed = server.get_json("/v1/scenes").await;
+    assert!(
+        listed["scenes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|s| s["name"] == "My-Box-v2.zip" && s["triangles"].as_u64() > Some(0)),
+        "{listed}"
+    );
+    let frames = started[1].as_u64().unwrap();
+    wait_for(c, "return window.relume.frames", |v| v.as_u64() >= Some(frames + 2), "frames of the uploaded scene")
+        .await;
 }

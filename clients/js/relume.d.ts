@@ -28,6 +28,15 @@ export interface TickStats {
   [k: string]: unknown;
 }
 
+export interface UploadRecord {
+  name: string;
+  bytes: number;
+  sha256: string;
+  triangles: number;
+  animations: string[];
+  scene_file: string;
+}
+
 export interface SessionView { id: string; scene: string; width: number; height: number; [k: string]: unknown }
 
 /** Linear RGB radiance, rows from the top: data[3 * (y * width + x) + c]. */
@@ -50,10 +59,13 @@ export class Client {
   constructor(url?: string, options?: { token?: string | null });
   url: string;
   token: string | null;
+  /** `body`: bytes (Blob, ArrayBuffer, typed array) are sent as they are, anything else as JSON. */
   raw(method: string, path: string, body?: unknown, init?: RequestInit): Promise<Response>;
   request(method: string, path: string, body?: unknown, init?: RequestInit): Promise<any>;
   techniques(): Promise<Record<string, unknown>>;
   scenes(): Promise<Array<Record<string, unknown>>>;
+  uploadScene(name: string, data: Blob | ArrayBuffer | Uint8Array): Promise<UploadRecord>;
+  deleteScene(name: string): Promise<void>;
   createSession(scene: string | Record<string, unknown>, options?: Record<string, unknown>): Promise<Session>;
   wsUrl(path: string): string;
 }

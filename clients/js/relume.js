@@ -44,6 +44,11 @@ function floats(buffer, width, height) {
   return out;
 }
 
+/** Whether a request body is sent as it is (bytes) rather than as JSON. */
+function isBinary(body) {
+  return body instanceof ArrayBuffer || ArrayBuffer.isView(body) || (typeof Blob !== "undefined" && body instanceof Blob);
+}
+
 export class Client {
   /** `url`: the server, e.g. "http://127.0.0.1:8080"; `token`: its bearer token, if any. */
   constructor(url = "http://127.0.0.1:8080", { token = null } = {}) {
@@ -51,17 +56,18 @@ export class Client {
     this.token = token;
   }
 
-  /** Sends a request (`body` as JSON; `init` more fetch options, such as `keepalive`) and
+  /** Sends a request (`body` as JSON, or bytes as they are; `init` more fetch options, such as `keepalive`) and
    * resolves to the response, or rejects with a {@link RelumeError} for an error answer. */
   async raw(method, path, body, init = {}) {
     const headers = {};
-    if (body !== undefined) headers["content-type"] = "application/json";
+    const binary = isBinary(body);
+    if (body !== undefined) headers["content-type"] = binary ? "application/octet-stream" : "application/json";
     if (this.token) headers.authorization = `Bearer ${this.token}`;
     const response = await fetch(this.url + path, {
       ...init,
       method,
       headers,
-      body: body === undefined ? undefined : JSON.stringify(body),
+      body: body === undefined || binary ? body : JSON.stringify(body),
     });
     if (!response.ok) {
       const text = await response.text();
@@ -82,7 +88,17 @@ export class Client {
 
   techniques() { return this.request("GET", "/v1/techniques"); }
 
+  /** The bundled and uploaded scenes (uploads with `bytes`, `sha256` and `triangles`). */
   async scenes() { return (await this.request("GET", "/v1/scenes")).scenes; }
+
+  /** Uploads a scene as `name` (`NAME.glb`, or `NAME.zip` of a .gltf with its files): `data` is
+   * a Blob or File (a browser streams it from disk), an ArrayBuffer or a Uint8Array. Resolves
+   * to its record {name, bytes, sha256, triangles, animations, scene_file}; sessions then open
+   * it by `name`, and the same name again replaces it. */
+  uploadScene(name, data) { return this.request("PUT", `/v1/scenes/${encodeURIComponent(name)}`, data); }
+
+  /** Deletes an uploaded scene (sessions already open on it keep it). */
+  async deleteScene(name) { await this.raw("DELETE", `/v1/scenes/${encodeURIComponent(name)}`); }
 
   /** Starts a session on a bundled scene's name or an inline scene; `options` are the other
    * fields of POST /v1/sessions (technique, width, height, seed, tick_hz, denoise, environment). */

@@ -20,6 +20,7 @@ pub mod routes;
 pub mod snapshot;
 pub mod state;
 pub mod turns;
+pub mod uploads;
 pub mod worker;
 pub mod ws;
 
@@ -30,7 +31,7 @@ use axum::extract::{DefaultBodyLimit, Request, State};
 use axum::http::StatusCode;
 use axum::middleware::{self, Next};
 use axum::response::{IntoResponse, Response};
-use axum::routing::{get, post};
+use axum::routing::{get, post, put};
 use axum::Router;
 use routes::Shared;
 use std::future::Future;
@@ -237,6 +238,12 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/sessions/{id}/stream.mjpeg", get(mjpeg::stream))
         .route("/sessions/{id}/{file}", get(routes::get_frame))
         .layer(middleware::from_fn_with_state(state.clone(), require_token));
+    // Uploads stream any size up to --upload-limit and bound their own pauses
+    // (uploads::receive), so neither the body limit nor the whole-request timeout applies.
+    let uploads = Router::new()
+        .route("/v1/scenes/{name}", put(uploads::put_scene).delete(uploads::delete_scene))
+        .layer(DefaultBodyLimit::disable())
+        .layer(middleware::from_fn_with_state(state.clone(), require_token));
     let app = Router::new()
         .route("/", get(routes::viewer_page))
         .route("/viewer.js", get(routes::viewer_script))
@@ -247,11 +254,12 @@ pub fn app(state: Arc<AppState>) -> Router {
         .route("/api/{file}", get(api_docs::file))
         .route("/api/examples/{file}", get(api_docs::example))
         .nest("/v1", v1)
+        .layer(DefaultBodyLimit::max(limits.max_body_bytes))
+        .layer(TimeoutLayer::with_status_code(StatusCode::REQUEST_TIMEOUT, limits.request_timeout))
+        .merge(uploads)
         .fallback(routes::not_found)
         .layer(middleware::from_fn_with_state(state.clone(), check_host))
         .layer(middleware::from_fn_with_state(state.clone(), count_rejections))
-        .layer(DefaultBodyLimit::max(limits.max_body_bytes))
-        .layer(TimeoutLayer::with_status_code(StatusCode::REQUEST_TIMEOUT, limits.request_timeout))
         .layer(middleware::from_fn(json_errors));
     let app = match cors(&state.config.access.origins) {
         Some(c) => app.layer(c),
@@ -267,7 +275,7 @@ fn cors(origins: &[String]) -> Option<tower_http::cors::CorsLayer> {
     (!allowed.is_empty()).then(|| {
         tower_http::cors::CorsLayer::new()
             .allow_origin(allowed)
-            .allow_methods([Method::GET, Method::POST, Method::PATCH, Method::DELETE])
+            .allow_methods([Method::GET, Method::POST, Method::PUT, Method::PATCH, Method::DELETE])
             .allow_headers([header::CONTENT_TYPE, header::AUTHORIZATION])
     })
 }

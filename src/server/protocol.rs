@@ -220,6 +220,29 @@ pub struct StatsHistory {
 pub struct SceneEntry {
     pub name: String,
     pub animations: Vec<String>,
+    /// For an uploaded scene: the bytes sent, their SHA-256, and the scene's triangles.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bytes: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sha256: Option<String>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub triangles: Option<u64>,
+}
+
+impl SceneEntry {
+    pub fn bundled(name: String, animations: Vec<String>) -> SceneEntry {
+        SceneEntry { name, animations, bytes: None, sha256: None, triangles: None }
+    }
+
+    pub fn uploaded(r: super::uploads::store::UploadRecord) -> SceneEntry {
+        SceneEntry {
+            name: r.name,
+            animations: r.animations,
+            bytes: Some(r.bytes),
+            sha256: Some(r.sha256),
+            triangles: Some(r.triangles),
+        }
+    }
 }
 
 /// `GET /v1/sessions`: every session, in id order.

@@ -21,6 +21,9 @@ pub const MIN_TICK_HZ: f32 = 0.01;
 #[derive(Clone, Debug)]
 pub struct Limits {
     pub max_body_bytes: usize,
+    /// Bytes one uploaded scene may take (`--upload-limit`): the `.glb` or `.zip` as sent, and
+    /// an archive's files once unpacked.
+    pub upload_limit: u64,
     /// Largest image side, and largest pixel count.
     pub max_side: u32,
     pub max_pixels: u64,
@@ -76,6 +79,7 @@ impl Default for Limits {
     fn default() -> Limits {
         Limits {
             max_body_bytes: 8 << 20,
+            upload_limit: 2 << 30,
             max_side: 2048,
             max_pixels: 1 << 20,
             max_sessions: 16,
@@ -278,20 +282,24 @@ pub fn valid_name(name: &str) -> bool {
     !name.is_empty() && name.len() <= 64 && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
 }
 
-/// A bundled scene's name: `NAME` (the file `NAME.json`), or a glTF file's name
-/// `NAME.glb` / `NAME.gltf`, with `NAME` a [`valid_name`].
+/// A scene's name: `NAME` (the file `NAME.json`), a glTF file's name `NAME.glb` /
+/// `NAME.gltf`, or an uploaded archive's `NAME.zip`, with `NAME` a [`valid_name`].
 pub fn valid_scene_name(name: &str) -> bool {
     match name.rsplit_once('.') {
-        Some((stem, "glb" | "gltf")) => valid_name(stem),
+        Some((stem, "glb" | "gltf" | "zip")) => valid_name(stem),
         Some(_) => false,
         None => valid_name(name),
     }
 }
 
-/// The file of a bundled scene named as [`valid_scene_name`] says, if it exists in `root`.
+/// The file of a scene named as [`valid_scene_name`] says, if it exists in `root` (for an
+/// uploaded archive, the glTF file inside its folder).
 pub fn bundled_scene_file(root: &std::path::Path, name: &str) -> Option<PathBuf> {
     if !valid_scene_name(name) {
         return None;
+    }
+    if name.ends_with(".zip") {
+        return super::uploads::store::zip_scene_file(root, name);
     }
     let file = if name.contains('.') { name.to_string() } else { format!("{name}.json") };
     Some(root.join(file)).filter(|p| p.is_file())
@@ -389,21 +397,28 @@ impl AppState {
         self.sessions.read().map(|s| s.len()).unwrap_or(0)
     }
 
-    /// Bundled scenes (`NAME.json`) with their animations (`NAME*.anim.json`), and glTF
-    /// scenes (`NAME.glb`, `NAME.gltf`, listed by file name) with the animations they hold.
+    /// Bundled scenes (`NAME.json`) with their animations (`NAME*.anim.json`), glTF scenes
+    /// (`NAME.glb`, `NAME.gltf`, listed by file name) with the animations they hold, and
+    /// uploads (`NAME.glb`, `NAME.zip`) with their sizes and triangle counts from their records.
+    /// Hidden names (uploads being received, records) are not scenes.
     pub fn list_scenes(&self) -> Vec<SceneEntry> {
         let root = &self.config.scenes_root;
         let mut names: Vec<String> = Vec::new();
         let mut anims: Vec<String> = Vec::new();
-        let mut gltf: Vec<SceneEntry> = Vec::new();
+        let mut files: Vec<SceneEntry> = Vec::new();
         for entry in std::fs::read_dir(root).into_iter().flatten().flatten() {
             let file = entry.file_name().to_string_lossy().to_string();
-            if let Some(a) = file.strip_suffix(".anim.json") {
+            if file.starts_with('.') {
+                continue;
+            }
+            if let Some(record) = super::uploads::store::read_record(root, &file) {
+                files.push(SceneEntry::uploaded(record));
+            } else if let Some(a) = file.strip_suffix(".anim.json") {
                 anims.push(a.to_string());
             } else if let Some(s) = file.strip_suffix(".json") {
                 names.push(s.to_string());
             } else if valid_scene_name(&file) && crate::scene::gltf::is_gltf_path(std::path::Path::new(&file)) {
-                gltf.push(SceneEntry { animations: self.gltf_animation_names(&entry.path()), name: file });
+                files.push(SceneEntry::bundled(file.clone(), self.gltf_animation_names(&entry.path())));
             }
         }
         names.sort();
@@ -413,10 +428,10 @@ impl AppState {
             .map(|name| {
                 let animations =
                     anims.iter().filter(|a| *a == &name || a.starts_with(&format!("{name}-"))).cloned().collect();
-                SceneEntry { name, animations }
+                SceneEntry::bundled(name, animations)
             })
             .collect();
-        out.extend(gltf);
+        out.extend(files);
         out.sort_by(|a, b| a.name.cmp(&b.name));
         out
     }

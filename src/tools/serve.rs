@@ -27,6 +27,10 @@ pub struct ServeArgs {
     /// machine's RAM); a session that would exceed it is refused with 429.
     #[arg(long)]
     pub server_memory: Option<u64>,
+    /// Largest scene upload (`PUT /v1/scenes/NAME`), in MiB: the .glb or .zip as sent, and an
+    /// archive's files unpacked.
+    #[arg(long, default_value_t = 2048)]
+    pub upload_limit: u64,
     /// Seconds without a request or WebSocket message after which a session is deleted.
     #[arg(long, default_value_t = 600)]
     pub session_idle: u64,
@@ -88,8 +92,10 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
     if args.max_connections == 0 || args.header_timeout == 0 {
         return Err(UsageError("--max-connections and --header-timeout must be at least 1".into()).into());
     }
-    if args.session_memory == 0 || args.server_memory == Some(0) {
-        return Err(UsageError("--session-memory and --server-memory must be at least 1 MiB".into()).into());
+    if args.session_memory == 0 || args.server_memory == Some(0) || args.upload_limit == 0 {
+        return Err(
+            UsageError("--session-memory, --server-memory and --upload-limit must be at least 1 MiB".into()).into()
+        );
     }
     let node = args.node.clone().unwrap_or_else(hostname);
     if !valid_node(&node) {
@@ -108,6 +114,7 @@ pub fn config(args: &ServeArgs) -> Result<ServerConfig> {
         limits: Limits {
             max_sessions: args.max_sessions,
             session_memory: args.session_memory << 20,
+            upload_limit: args.upload_limit << 20,
             server_memory,
             session_idle: std::time::Duration::from_secs(args.session_idle),
             max_connections: args.max_connections,

@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests: load bundled scenes and run sessions on real Embree.
 #![allow(dead_code)]
+pub mod archive;
 pub mod gltf_doc;
 pub mod process;
 pub mod server;
@@ -14,6 +15,31 @@ use std::path::{Path, PathBuf};
 
 pub fn scenes_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes")
+}
+
+/// An empty folder of its own under the system temp dir for `tag` (emptied if it was there).
+pub fn fresh_dir(tag: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("relume-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    dir
+}
+
+/// A copy of the bundled scenes for a server that tests upload to (never the repository's).
+pub fn scenes_copy(tag: &str) -> PathBuf {
+    fn copy(from: &Path, to: &Path) {
+        std::fs::create_dir_all(to).expect("scenes copy");
+        for entry in std::fs::read_dir(from).expect("scenes").flatten() {
+            let target = to.join(entry.file_name());
+            match entry.file_type().expect("file type").is_dir() {
+                true => copy(&entry.path(), &target),
+                false => drop(std::fs::copy(entry.path(), target).expect("copied")),
+            }
+        }
+    }
+    let to = fresh_dir(&format!("scenes-{tag}"));
+    copy(&scenes_dir(), &to);
+    to
 }
 
 pub fn load(name: &str) -> Scene {

@@ -16,9 +16,14 @@ impl Served {
     /// Starts `relume serve --addr 127.0.0.1:0 --threads 2 --scenes scenes/` with `extra`
     /// arguments, and waits (bounded) for the address it prints.
     pub fn start(extra: &[&str]) -> Served {
+        Served::start_in(&super::scenes_dir(), extra)
+    }
+
+    /// [`Served::start`] on the scenes folder `scenes` (a test's own, where it uploads).
+    pub fn start_in(scenes: &std::path::Path, extra: &[&str]) -> Served {
         let mut child = Command::new(BIN)
             .args(["serve", "--addr", "127.0.0.1:0", "--threads", "2", "--scenes"])
-            .arg(super::scenes_dir())
+            .arg(scenes)
             .args(extra)
             .stderr(Stdio::piped())
             .spawn()

@@ -39,8 +39,25 @@ impl TestServer {
         limits: Limits,
         access: Access,
     ) -> TestServer {
+        let scenes = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+        TestServer::start_with_config(listener, token, limits, access, &scenes).await
+    }
+
+    /// A server on the scenes folder `scenes` (a copy, where a test uploads).
+    pub async fn start_in(scenes: &Path, limits: Limits) -> TestServer {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        TestServer::start_with_config(listener, None, limits, Access::default(), scenes).await
+    }
+
+    async fn start_with_config(
+        listener: tokio::net::TcpListener,
+        token: Option<&str>,
+        limits: Limits,
+        access: Access,
+        scenes: &Path,
+    ) -> TestServer {
         let config = ServerConfig {
-            scenes_root: Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").canonicalize().unwrap(),
+            scenes_root: scenes.canonicalize().unwrap(),
             token: token.map(str::to_string),
             threads: 2,
             isa: None,

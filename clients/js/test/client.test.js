@@ -2,6 +2,8 @@
 import { test } from "node:test";
 import assert from "node:assert/strict";
 import { createRequire } from "node:module";
+import { createHash } from "node:crypto";
+import { readFileSync } from "node:fs";
 import { Client, RelumeError } from "../relume.js";
 
 // Node's own WebSocket (22+), else the `ws` package scripts/nodetools.sh installs.
@@ -36,6 +38,26 @@ test("a frame is the linear radiance, row by row", async () => {
   const png = await s.framePng();
   assert.deepEqual(Array.from(png.slice(0, 4)), [0x89, 0x50, 0x4e, 0x47]);
   await s.delete();
+});
+
+test("an uploaded scene is the bytes sent and opens as a session", async () => {
+  const c = new Client(URL);
+  const glb = readFileSync(new globalThis.URL("../../../scenes/cornell-box.glb", import.meta.url));
+  const record = await c.uploadScene("js-box.glb", new Uint8Array(glb));
+  assert.equal(record.bytes, glb.length);
+  assert.equal(record.sha256, createHash("sha256").update(glb).digest("hex"));
+  const listed = (await c.scenes()).find((s) => s.name === "js-box.glb");
+  assert.equal(listed.triangles, record.triangles);
+  const frames = [];
+  for (const scene of ["cornell-box.glb", "js-box.glb"]) {
+    const s = await c.createSession(scene, { technique: { id: "path", spp: 2 }, width: 16, height: 12, seed: 3 });
+    await s.tick();
+    frames.push((await s.frame()).data);
+    await s.delete();
+  }
+  assert.deepEqual(frames[0], frames[1]);
+  await c.deleteScene("js-box.glb");
+  await assert.rejects(c.deleteScene("js-box.glb"), (e) => e instanceof RelumeError && e.status === 404);
 });
 
 test("errors reject with one error type naming the field", async () => {

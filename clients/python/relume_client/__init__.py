@@ -8,7 +8,7 @@
         img = s.frame()  # numpy float32 (H, W, 3), linear
 """
 from .client import AsyncClient, AsyncSession, Client, RelumeError, Session, TickUpdate, raw_frame
-from .models import EditsAccepted, ErrorBody, SessionView, TickDone, TickStats
+from .models import EditsAccepted, ErrorBody, SessionView, TickDone, TickStats, UploadRecord
 
 __all__ = [
     "AsyncClient",
@@ -22,5 +22,6 @@ __all__ = [
     "TickDone",
     "TickStats",
     "TickUpdate",
+    "UploadRecord",
     "raw_frame",
 ]

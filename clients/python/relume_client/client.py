@@ -9,7 +9,10 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
+import pathlib
 import struct
+import urllib.parse
 from dataclasses import dataclass
 from typing import Any, AsyncIterator, Callable, Dict, Iterable, List, Optional, Sequence, Union
 
@@ -17,7 +20,7 @@ import httpx
 import numpy as np
 import websockets
 
-from .models import EditsAccepted, SessionView, TickDone, TickStats
+from .models import EditsAccepted, SessionView, TickDone, TickStats, UploadRecord
 
 Edit = Dict[str, Any]
 #: Edits for each step of a stream: a list per step, or a function of the step's index.
@@ -59,6 +62,16 @@ def raw_frame(data: bytes, width: int, height: int) -> np.ndarray:
 
 def _headers(token: Optional[str]) -> Dict[str, str]:
     return {"authorization": f"Bearer {token}"} if token else {}
+
+
+#: Bytes an upload reads from its file at a time.
+UPLOAD_CHUNK = 1 << 20
+
+
+def _file_chunks(path: pathlib.Path) -> Iterable[bytes]:
+    with open(path, "rb") as f:
+        while chunk := f.read(UPLOAD_CHUNK):
+            yield chunk
 
 
 def _create_body(scene: Union[str, Dict[str, Any]], technique: Optional[Dict[str, Any]], **options: Any) -> Dict[str, Any]:
@@ -154,8 +167,22 @@ class Client:
         return self._request("GET", "/v1/techniques")
 
     def scenes(self) -> List[Dict[str, Any]]:
-        """The bundled scenes."""
+        """The bundled and uploaded scenes (uploads with `bytes`, `sha256` and `triangles`)."""
         return self._request("GET", "/v1/scenes")["scenes"]
+
+    def upload_scene(self, path: Union[str, os.PathLike], name: Optional[str] = None) -> UploadRecord:
+        """Uploads a `.glb`, or a `.zip` of a `.gltf` with its files, streamed from disk (any
+        size up to the server's `--upload-limit`), as `name` (default: the file's name). Sessions
+        then open it by that name; the same name again replaces it."""
+        path = pathlib.Path(path)
+        target = urllib.parse.quote(name or path.name, safe="")
+        headers = {"content-length": str(path.stat().st_size), "content-type": "application/octet-stream"}
+        body = self._request("PUT", f"/v1/scenes/{target}", content=_file_chunks(path), headers=headers)
+        return UploadRecord.from_json(body)
+
+    def delete_scene(self, name: str) -> None:
+        """Deletes an uploaded scene (sessions already open on it keep it)."""
+        self._raw("DELETE", f"/v1/scenes/{urllib.parse.quote(name, safe='')}")
 
     def sessions(self) -> List[SessionView]:
         return [SessionView.from_json(v) for v in self._request("GET", "/v1/sessions")["sessions"]]

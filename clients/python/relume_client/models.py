@@ -108,5 +108,21 @@ class SessionView:
         return view
 
 
+@dataclass(frozen=True)
+class UploadRecord:
+    """`PUT /v1/scenes/{name}`: the scene stored, with the size and SHA-256 of the bytes sent."""
+
+    name: str
+    bytes: int
+    sha256: str
+    triangles: int
+    animations: List[str]
+    scene_file: str
+
+    @classmethod
+    def from_json(cls, body: Dict[str, Any]) -> "UploadRecord":
+        return _from_json(cls, body)
+
+
 #: The classes a test checks against the OpenAPI description's schemas of the same name.
-SCHEMAS = (ErrorBody, EditsAccepted, TickStats, TickDone, SessionView)
+SCHEMAS = (ErrorBody, EditsAccepted, TickStats, TickDone, SessionView, UploadRecord)

@@ -1,6 +1,7 @@
 """The Python client against a real server (RELUME_URL, started by tests/clients.rs)."""
 import asyncio
 import dataclasses
+import hashlib
 import os
 import pathlib
 
@@ -104,6 +105,35 @@ def test_every_error_answer_raises_one_exception_naming_the_field(client):
         client.create_session("no-such-scene")
     assert unknown.value.status == 404 and "scene" in unknown.value.detail
     s.delete()
+
+
+def test_an_uploaded_scene_opens_as_the_scene_it_is(client, tmp_path):
+    # A scene the server has as cornell-box.glb, uploaded under another name from a file: the
+    # record is the bytes' own, and a session on the upload renders the same frame, bit for bit.
+    glb = (ROOT / "scenes" / "cornell-box.glb").read_bytes()
+    (tmp_path / "py-box.glb").write_bytes(glb)
+    record = client.upload_scene(tmp_path / "py-box.glb")
+    assert (record.name, record.bytes, record.sha256) == ("py-box.glb", len(glb), hashlib.sha256(glb).hexdigest())
+    listed = next(s for s in client.scenes() if s["name"] == "py-box.glb")
+    assert listed["triangles"] == record.triangles > 0
+    frames = []
+    for scene in ["cornell-box.glb", "py-box.glb"]:
+        s = client.create_session(scene, technique={"id": "path", "spp": 2}, width=16, height=12, seed=3)
+        s.tick()
+        frames.append(s.frame())
+        s.delete()
+    assert np.array_equal(frames[0], frames[1])
+    # Control: the camera moved, the frame differs, so equal frames are not a given.
+    s = client.create_session("py-box.glb", technique={"id": "path", "spp": 2}, width=16, height=12, seed=3)
+    s.edit([{"target": "camera", "position": [278, 273, -700]}])
+    s.tick()
+    assert not np.array_equal(frames[0], s.frame())
+    s.delete()
+    client.delete_scene("py-box.glb")
+    assert all(s["name"] != "py-box.glb" for s in client.scenes())
+    with pytest.raises(RelumeError) as again:
+        client.delete_scene("py-box.glb")
+    assert again.value.status == 404 and "py-box.glb" in again.value.detail
 
 
 def test_the_async_stream_yields_ticks_with_their_acknowledged_edits():

@@ -345,11 +345,32 @@ function toBase64(buffer) {
   return btoa(text);
 }
 
-// A .glb (or self-contained .gltf) dropped on the page or chosen starts a session on it.
+// Files up to this size go inline with the session request (as base64, within the server's
+// 8 MiB request limit); larger ones, and every .zip, are uploaded first.
+const INLINE_BYTES = 4 << 20;
+
+// A .glb, a self-contained .gltf, or a .zip of a .gltf with its files, dropped on the page or
+// chosen, starts a session on it: small ones inline, others uploaded (PUT /v1/scenes/NAME,
+// streamed from disk by the browser, so any size the server allows) and then opened by name.
 async function startFile(file) {
   if (!file) return;
-  status(`reading ${file.name}…`);
-  await start(toBase64(await file.arrayBuffer()));
+  const zip = file.name.toLowerCase().endsWith(".zip");
+  if (!zip && file.size <= INLINE_BYTES) {
+    status(`reading ${file.name}…`);
+    await start(toBase64(await file.arrayBuffer()));
+    return;
+  }
+  const stem = file.name.replace(/\.[^.]*$/, "").replace(/[^A-Za-z0-9_-]+/g, "-").replace(/^-+|-+$/g, "") || "scene";
+  const name = `${stem}.${zip ? "zip" : "glb"}`;
+  status(`uploading ${file.name} (${(file.size / 1048576).toFixed(1)} MiB) as ${name}…`);
+  try {
+    const record = await client.uploadScene(name, file);
+    await loadScenes();
+    $("scene").value = record.name;
+    await start();
+  } catch (e) {
+    status("error: " + e.message);
+  }
 }
 state.startFile = startFile; // for tests
 
