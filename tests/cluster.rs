@@ -100,13 +100,16 @@ fn light_edit() -> Value {
 
 #[test]
 fn two_nodes_behind_haproxy_route_drain_and_migrate() {
-    let mut a = Served::start(&["--node", "relume-0", "--drain-grace", "60"]);
-    let b = Served::start(&["--node", "relume-1"]);
+    // One scenes folder shared by both nodes, as a shared volume is in a deployment.
+    let scenes = common::scenes_copy("cluster");
+    let mut a = Served::start_in(&scenes, &["--node", "relume-0", "--drain-grace", "60"]);
+    let b = Served::start_in(&scenes, &["--node", "relume-1"]);
     let dead = format!("127.0.0.1:{}", free_port());
     let proxy = Proxy::start([&a.addr, &b.addr, &dead]);
     let runtime = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
     let http = reqwest::Client::builder().timeout(Duration::from_secs(60)).build().unwrap();
     let ids = runtime.block_on(route_through(&http, &proxy, &a));
+    runtime.block_on(an_upload_through_the_proxy_opens_on_every_node(&http, &proxy));
     // Drain relume-0: it refuses creates, the proxy stops sending it any, its sessions tick on.
     a.sigterm();
     let on_a: Vec<String> = ids.iter().filter(|id| id.starts_with("relume-0.")).cloned().collect();
@@ -116,6 +119,27 @@ fn two_nodes_behind_haproxy_route_drain_and_migrate() {
     // With its sessions gone, the drained node exits cleanly before its grace ends.
     let status = a.wait_exit(Duration::from_secs(30));
     assert_eq!(status.code(), Some(0), "relume-0 ended with {status:?}");
+    let _ = std::fs::remove_dir_all(&scenes);
+}
+
+/// A scene uploaded through the proxy lands on one node; the nodes share their scenes folder,
+/// so sessions on it open on every node the proxy balances creates to.
+async fn an_upload_through_the_proxy_opens_on_every_node(http: &reqwest::Client, proxy: &Proxy) {
+    let glb = std::fs::read(common::scenes_dir().join("cornell-box.glb")).unwrap();
+    let r = http.put(proxy.url("/v1/scenes/shared.glb")).body(glb).send().await.unwrap();
+    assert_eq!(r.status(), 201, "{}", r.text().await.unwrap_or_default());
+    let mut nodes = std::collections::BTreeMap::new();
+    for i in 0..6 {
+        let body = json!({"scene": "shared.glb", "width": 8, "height": 8, "seed": i});
+        let (status, node, v) = post(http, proxy.url("/v1/sessions"), &body).await;
+        assert_eq!(status, 201, "{node}: {v}");
+        nodes.entry(node).or_insert_with(Vec::new).push(v["id"].as_str().unwrap().to_string());
+    }
+    assert_eq!(nodes.len(), 2, "the creates reached only {:?}", nodes.keys());
+    for id in nodes.values().flatten() {
+        let r = http.delete(proxy.url(&format!("/v1/sessions/{id}"))).send().await.unwrap();
+        assert_eq!(r.status(), 204);
+    }
 }
 
 /// Creates [`SESSIONS`] sessions through the proxy, checks that creates are balanced, that

@@ -79,8 +79,7 @@ fn over_limit(limit: u64) -> ApiError {
 /// Writes the body to `path` as it arrives, at most `limit` bytes, and returns its length and
 /// SHA-256; a pause longer than `idle` between chunks ends it with 408.
 async fn receive(body: Body, path: &FsPath, limit: u64, idle: std::time::Duration) -> Result<(u64, String), ApiError> {
-    let mut file =
-        tokio::fs::File::create(path).await.map_err(|e| ApiError::internal(format!("staging an upload: {e}")))?;
+    let mut file = tokio::fs::File::create(path).await.map_err(not_stored)?;
     let mut stream = body.into_data_stream();
     let (mut hash, mut bytes) = (Sha256::new(), 0u64);
     loop {
@@ -104,11 +103,20 @@ async fn receive(body: Body, path: &FsPath, limit: u64, idle: std::time::Duratio
             return Err(over_limit(limit));
         }
         hash.update(&chunk);
-        file.write_all(&chunk).await.map_err(|e| ApiError::internal(format!("staging an upload: {e}")))?;
+        file.write_all(&chunk).await.map_err(not_stored)?;
     }
-    file.flush().await.map_err(|e| ApiError::internal(format!("staging an upload: {e}")))?;
+    file.flush().await.map_err(not_stored)?;
     let hex = hash.finalize().iter().map(|b| format!("{b:02x}")).collect();
     Ok((bytes, hex))
+}
+
+/// 507: the scenes folder takes no more (read-only, full, or not this process's to write).
+fn not_stored(e: std::io::Error) -> ApiError {
+    ApiError::new(
+        StatusCode::INSUFFICIENT_STORAGE,
+        "insufficient_storage",
+        format!("body: this server's scenes folder cannot store the upload ({e}); see --scenes"),
+    )
 }
 
 /// Reads and drops at most [`DRAIN_BYTES`] more of a refused body, while it keeps coming.
