@@ -317,30 +317,35 @@ async fn picks_by_click(c: &fantoccini::Client, server: &TestServer) {
     wait_for(c, "return document.getElementById('target').value", |v| *v == want, "the clicked bunny selected").await;
 }
 
-/// Drop a .glb: the page starts a session on it (inline) and frames arrive.
-async fn takes_a_dropped_glb(c: &fantoccini::Client, server: &TestServer) {
-    let glb = std::fs::read(common::scenes_dir().join("cornell-box.glb")).unwrap();
-    let b64 = base64::Engine::encode(&base64::engine::general_purpose::STANDARD, glb);
+/// Drops `bytes` as the file `name` on the page; returns the view of the session it started
+/// once frames of it arrive.
+async fn drop_file(c: &fantoccini::Client, server: &TestServer, bytes: Vec<u8>, name: &str) -> serde_json::Value {
+    let b64 = base64::Engine::encode(&base64::engine::general_purpose::STANDARD, bytes);
     let before = c.execute("return window.relume.id", vec![]).await.unwrap();
     c.execute(
         "const b = atob(arguments[0]); const u = new Uint8Array(b.length); for (let i = 0; i < b.length; i++) u[i] = b.charCodeAt(i); \
-         window.relume.startFile(new File([u], 'cornell-box.glb'));",
-        vec![json!(b64)],
+         window.relume.startFile(new File([u], arguments[1]));",
+        vec![json!(b64), json!(name)],
     )
     .await
     .unwrap();
-    let dropped = wait_for(
+    let started = wait_for(
         c,
         "return [window.relume.id, window.relume.frames]",
         |v| v[0] != before && !v[0].is_null(),
-        "the dropped scene's session",
+        &format!("the session on the dropped {name}"),
     )
     .await;
-    let id = dropped[0].as_str().unwrap();
-    let view = server.get_json(&format!("/v1/sessions/{id}")).await;
-    assert_eq!(view["scene"], "inline", "{view}");
-    let frames = dropped[1].as_u64().unwrap();
+    let frames = started[1].as_u64().unwrap();
     wait_for(c, "return window.relume.frames", |v| v.as_u64() >= Some(frames + 2), "frames of the dropped scene").await;
+    server.get_json(&format!("/v1/sessions/{}", started[0].as_str().unwrap())).await
+}
+
+/// Drop a .glb: the page starts a session on it (inline) and frames arrive.
+async fn takes_a_dropped_glb(c: &fantoccini::Client, server: &TestServer) {
+    let glb = std::fs::read(common::scenes_dir().join("cornell-box.glb")).unwrap();
+    let view = drop_file(c, server, glb, "cornell-box.glb").await;
+    assert_eq!(view["scene"], "inline", "{view}");
 }
 
 /// Drop a .zip (a .gltf with its buffer): the page uploads it, lists it, and starts a session
@@ -349,35 +354,9 @@ async fn uploads_a_dropped_zip(c: &fantoccini::Client, server: &TestServer) {
     use common::archive::{as_gltf, zip_of, Entry};
     let (gltf, bin) = as_gltf(&std::fs::read(common::scenes_dir().join("cornell-box.glb")).unwrap());
     let archive = zip_of(&[Entry::File("box.gltf", &gltf), Entry::File("scene.bin", &bin)]);
-    let b64 = base64::Engine::encode(&base64::engine::general_purpose::STANDARD, archive);
-    let before = c.execute("return window.relume.id", vec![]).await.unwrap();
-    c.execute(
-        "const b = atob(arguments[0]); const u = new Uint8Array(b.length); for (let i = 0; i < b.length; i++) u[i] = b.charCodeAt(i); \
-         window.relume.startFile(new File([u], 'My Box (v2).zip'));",
-        vec![json!(b64)],
-    )
-    .await
-    .unwrap();
-    let started = wait_for(
-        c,
-        "return [window.relume.id, window.relume.frames]",
-        |v| v[0] != before && !v[0].is_null(),
-        "the uploaded scene's session",
-    )
-    .await;
-    let id = started[0].as_str().unwrap();
-    let view = server.get_json(&format!("/v1/sessions/{id}")).await;
+    let view = drop_file(c, server, archive, "My Box (v2).zip").await;
     assert_eq!(view["scene"], "My-Box-v2.zip", "{view}");
     let listed = server.get_json("/v1/scenes").await;
-    assert!(
-        listed["scenes"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .any(|s| s["name"] == "My-Box-v2.zip" && s["triangles"].as_u64() > Some(0)),
-        "{listed}"
-    );
-    let frames = started[1].as_u64().unwrap();
-    wait_for(c, "return window.relume.frames", |v| v.as_u64() >= Some(frames + 2), "frames of the uploaded scene")
-        .await;
+    let entry = listed["scenes"].as_array().unwrap().iter().find(|s| s["name"] == "My-Box-v2.zip").cloned();
+    assert!(entry.is_some_and(|e| e["triangles"].as_u64() > Some(0)), "{listed}");
 }
