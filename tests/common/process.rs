@@ -57,6 +57,13 @@ impl Served {
         format!("http://{}{path}", self.addr)
     }
 
+    /// The server's peak resident memory so far (`VmHWM`), in bytes.
+    pub fn peak_rss(&self) -> u64 {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id())).expect("/proc status");
+        let line = status.lines().find(|l| l.starts_with("VmHWM:")).expect("VmHWM");
+        line.split_whitespace().nth(1).and_then(|kib| kib.parse::<u64>().ok()).expect("kB") * 1024
+    }
+
     /// Sends SIGTERM (the node drains, then exits).
     pub fn sigterm(&self) {
         let pid = self.child.id().to_string();
